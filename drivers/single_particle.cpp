@@ -1,0 +1,145 @@
+static const char help[] =
+    "single-particle: one neo-Hookean disk compressed by four frictionless, pressure-driven walls\n"
+    "(the paper's single-particle test, Fig. Pp_vs_Phip).\n\n"
+    "The disk (diameter 1) starts touching the four walls of a square box (phi_p = pi/4). Each level\n"
+    "of -pressures (P/E) is reached quasistatically with automatic sub-stepping; at every level the\n"
+    "packing fraction phi_p = particle area / box area is exact equilibrium of\n"
+    "    min  sum_e W(F) + P * box_area   subject to   gap(node, wall) >= 0,\n"
+    "solved by semismooth Newton on the KKT system (PETSc SNES, MUMPS LU).\n\n"
+    "Writes <output_dir>/curve.csv (one row per level) and <output_dir>/levels.h5 (deformed meshes).\n\n"
+    "Examples:\n"
+    "  build/bin/single-particle -mesh_triangles 92 -output_dir out/sp\n"
+    "  build/bin/single-particle -pressures 0.5 -nu 0.4999 -newton_monitor\n"
+    "  mpirun -n 2 build/bin/single-particle -options_file petsc-options/single-particle.opts\n\n";
+
+#include <petscsnes.h>
+
+#include <cmath>
+#include <exception>
+#include <string>
+#include <vector>
+
+#include "deformix/disk_mesh.hpp"
+#include "deformix/load_controller.hpp"
+#include "deformix/options.hpp"
+#include "deformix/output.hpp"
+#include "deformix/problem.hpp"
+
+using namespace deformix;
+
+namespace {
+
+struct SingleParticleOptions {
+  PetscInt mesh_triangles = 92;
+  PetscInt element_order = 2;
+  std::vector<double> pressures;
+  std::string output_dir;
+  PetscBool write_hdf5 = PETSC_TRUE;
+};
+
+PetscErrorCode ProcessOptions(MPI_Comm comm, SingleParticleOptions *o) {
+  PetscFunctionBeginUser;
+  PetscOptionsBegin(comm, nullptr, "Single-particle test", "deformix");
+  PetscCall(PetscOptionsInt("-mesh_triangles", "approximate number of triangles of the disk mesh (>= 24)", "",
+                            o->mesh_triangles, &o->mesh_triangles, nullptr));
+  PetscCall(PetscOptionsInt("-element_order", "1: linear triangles (lock), 2: quadratic isoparametric", "",
+                            o->element_order, &o->element_order, nullptr));
+  PetscCall(PetscOptionsBool("-write_hdf5", "write the deformed mesh of every level to levels.h5", "", o->write_hdf5,
+                             &o->write_hdf5, nullptr));
+  PetscOptionsEnd();
+  PetscCheck(o->mesh_triangles >= 24, comm, PETSC_ERR_USER_INPUT,
+             "-mesh_triangles %" PetscInt_FMT " is too few: the disk needs at least 24 triangles (2 rings)",
+             o->mesh_triangles);
+  PetscCheck(o->mesh_triangles <= 2000000, comm, PETSC_ERR_USER_INPUT,
+             "-mesh_triangles %" PetscInt_FMT " is too many for one disk", o->mesh_triangles);
+  PetscCheck(o->element_order == 1 || o->element_order == 2, comm, PETSC_ERR_USER_INPUT,
+             "-element_order %" PetscInt_FMT ": choose 1 or 2", o->element_order);
+  const std::vector<double> defaults = {1e-4, 1e-3, 5e-3, 0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5};
+  PetscCall(GetPressureList(comm, defaults, &o->pressures));
+  PetscCall(GetOutputDirectory(comm, "out/single-particle", &o->output_dir));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode Run(MPI_Comm comm) {
+  SingleParticleOptions opts;
+  ProblemParameters params;
+  LoadControlParameters load;
+  PetscLogStage stage_solve, stage_output;
+  PetscFunctionBeginUser;
+  // 1. Options: everything is validated before anything is written.
+  PetscCall(ProcessOptions(comm, &opts));
+  PetscCall(params.SetFromOptions(comm));
+  PetscCall(load.SetFromOptions(comm));
+  if (HelpRequested()) PetscFunctionReturn(0);
+  PetscCall(PrepareOutputDirectory(comm, opts.output_dir));
+  PetscCall(PetscLogStageRegister("Solve", &stage_solve));
+  PetscCall(PetscLogStageRegister("Output", &stage_output));
+
+  // 2. Scene: a disk of diameter 1 touching the four walls.
+  const double radius = 0.5;
+  DiskMesh mesh;
+  try {
+    mesh = make_disk_mesh(radius, static_cast<int>(opts.mesh_triangles), static_cast<int>(opts.element_order));
+  } catch (const std::exception &e) {
+    SETERRQ(comm, PETSC_ERR_USER_INPUT, "disk mesh: %s", e.what());
+  }
+  CompactionProblem problem(comm);
+  PetscCall(problem.SetParameters(params));
+  problem.AddDeformableBody(mesh, 0.0, 0.0);
+  const double walls[4] = {-radius, radius, -radius, radius};
+  problem.SetWalls(walls);
+  const StateSummary s0 = problem.Summary();
+  PetscCall(PetscPrintf(comm,
+                        "single-particle: %d triangles (order %d, min angle %.1f deg), %d nodes, E = %g, nu = %g\n"
+                        "  phi_p at P = 0: %.6f (pi/4 = %.6f)\n",
+                        mesh.num_cells(), mesh.order, min_angle_degrees(mesh), mesh.num_nodes(), params.young,
+                        params.poisson, s0.packing_fraction, M_PI / 4));
+
+  // 3. Levels: solve, measure, write.
+  CsvWriter curve;
+  PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv",
+                       {"P_over_E", "phi", "area_ratio", "newton_its", "seconds", "substeps", "cuts", "box_width",
+                        "box_height", "wall_force_error", "max_penetration", "min_cell_area_ratio", "active_contacts"}));
+  const std::string h5 = opts.output_dir + "/levels.h5";
+  PetscCall(PetscPrintf(comm, "  %10s %10s %10s %6s %6s %9s\n", "P/E", "phi_p", "area_ratio", "newton", "steps",
+                        "seconds"));
+  double step = -1.0;
+  for (size_t level = 0; level < opts.pressures.size(); ++level) {
+    const double P_over_E = opts.pressures[level];
+    LevelReport rep;
+    PetscCall(PetscLogStagePush(stage_solve));
+    PetscCall(AdvanceToPressure(problem, load, P_over_E * params.young, &step, &rep));
+    PetscCall(PetscLogStagePop());
+    const StateSummary s = problem.Summary();
+    // Wall equilibrium check: each wall's contact forces against P x (its length).
+    const double P = P_over_E * params.young;
+    double wall_err = 0.0;
+    const double lengths[4] = {s.box_height, s.box_height, s.box_width, s.box_width};
+    for (int k = 0; k < 4; ++k) wall_err = std::max(wall_err, std::abs(s.wall_force[k] - P * lengths[k]));
+    if (P > 0.0) wall_err /= P * s.box_width;
+    PetscCall(PetscPrintf(comm, "  %10.4g %10.6f %10.6f %6" PetscInt_FMT " %6d %9.3f\n", P_over_E,
+                          s.packing_fraction, s.area_ratio, rep.newton_its, rep.substeps, rep.seconds));
+    PetscCall(PetscLogStagePush(stage_output));
+    PetscCall(curve.Row({P_over_E, s.packing_fraction, s.area_ratio, static_cast<double>(rep.newton_its), rep.seconds,
+                         static_cast<double>(rep.substeps), static_cast<double>(rep.cuts), s.box_width, s.box_height,
+                         wall_err, s.max_penetration, s.min_cell_area_ratio, static_cast<double>(s.active_contacts)}));
+    if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
+    PetscCall(PetscLogStagePop());
+  }
+  PetscCall(PetscPrintf(comm, "  wrote %s/curve.csv%s\n", opts.output_dir.c_str(),
+                        opts.write_hdf5 ? " and levels.h5" : ""));
+  PetscFunctionReturn(0);
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+  PetscCall(PetscInitialize(&argc, &argv, nullptr, help));
+  PetscErrorCode ierr = Run(PETSC_COMM_WORLD);
+  if (ierr) {
+    PetscFinalize();
+    return 1;
+  }
+  PetscCall(PetscFinalize());
+  return 0;
+}

@@ -1,0 +1,53 @@
+// Contact as complementarity, solved by semismooth Newton.
+//
+// Every contact c has a gap g_c(x) (>= 0 when the bodies are apart) and a
+// normal multiplier lambda_c (the compressive contact force, per unit
+// thickness). Signorini's conditions
+//     g >= 0,   lambda >= 0,   g lambda = 0
+// are replaced by one semismooth equation, the min (Alart-Curnier /
+// projection) NCP function
+//     C(lambda, g) = lambda - max(0, lambda - c_n g) = min(lambda, c_n g) = 0,
+// or the Fischer-Burmeister function
+//     C(lambda, g) = lambda + c_n g - sqrt(lambda^2 + (c_n g)^2) = 0.
+// c_n ~ E scales the gap to force units; it changes the Newton path, never
+// the solution. The generalized Jacobian of the min function is
+//     active   (lambda - c_n g >= 0):  dC = c_n dg
+//     inactive (lambda - c_n g <  0):  dC = d lambda,
+// and the contact adds -lambda dg/dx to the equilibrium residual of every
+// unknown the gap depends on (bodies and walls), with -lambda d2g/dx2 to the
+// stiffness when the gap is curved. No penalty: a converged solution has
+// g >= 0 and lambda >= 0 exactly up to the Newton tolerance.
+//
+// References: Alart & Curnier, CMAME 92 (1991); Fischer, Optimization 24
+// (1992); Hueber & Wohlmuth, CMAME 194 (2005) (primal-dual active set =
+// semismooth Newton).
+#pragma once
+#include <array>
+
+namespace deformix {
+
+enum class NcpFunction { Min, FischerBurmeister };
+
+// Value and generalized derivatives of the normal NCP function.
+struct NormalNcp {
+  double value = 0.0;
+  double d_lambda = 0.0;  // dC / dlambda
+  double d_gap = 0.0;     // dC / dg
+  bool active = false;    // the constraint is treated as closed (g = 0) by this Newton step
+};
+
+NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n);
+
+// Kinematics of one contact: the gap and its first derivatives with respect
+// to the global unknowns it depends on (at most kMaxDofs of them). A
+// node-against-wall gap is linear in the unknowns; node-to-segment gaps of
+// the mixture add second derivatives.
+struct ContactKinematics {
+  static constexpr int kMaxDofs = 8;
+  double gap = 0.0;
+  int ndof = 0;
+  std::array<int, kMaxDofs> dofs{};     // global unknown indices
+  std::array<double, kMaxDofs> dgap{};  // dg / d(unknown)
+};
+
+}  // namespace deformix

@@ -1,0 +1,36 @@
+// Quasistatic load control with automatic sub-stepping.
+//
+// A pressure level P_target is reached from the current pressure through
+// sub-steps: each sub-step solves exact equilibrium at an intermediate
+// pressure. A sub-step whose Newton solve fails (divergence, maximum
+// iterations, an inverted element reported as a domain error) is discarded,
+// the state restored and the step halved; a step that converged in few
+// Newton iterations lets the next one grow. The suggested step is carried
+// from level to level.
+#pragma once
+#include "deformix/problem.hpp"
+
+namespace deformix {
+
+struct LoadControlParameters {
+  PetscInt max_cuts = 16;    // give up after this many halvings in one level
+  PetscInt easy_its = 5;     // grow the step after a sub-step that took at most this many Newton iterations
+  double growth = 2.0;       // step growth factor
+  PetscErrorCode SetFromOptions(MPI_Comm comm);
+};
+
+struct LevelReport {
+  double pressure = 0.0;
+  PetscInt newton_its = 0;   // all Newton iterations of the level, failed sub-steps included
+  int substeps = 0;          // accepted sub-steps
+  int cuts = 0;              // rejected sub-steps
+  double seconds = 0.0;
+  bool converged = false;
+};
+
+// Brings `problem` from its current pressure to `target`. `step` is the
+// suggested pressure increment (<= 0: try the whole jump); it is updated.
+PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlParameters &params, double target,
+                                 double *step, LevelReport *report);
+
+}  // namespace deformix

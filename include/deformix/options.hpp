@@ -1,0 +1,25 @@
+// Driver options shared by every executable: pressure list and output
+// directory, validated before anything is written.
+#pragma once
+#include <petscsys.h>
+
+#include <string>
+#include <vector>
+
+namespace deformix {
+
+// Reads -pressures (comma-separated P/E values). Refuses an empty list,
+// negative or non-finite values.
+PetscErrorCode GetPressureList(MPI_Comm comm, const std::vector<double> &defaults, std::vector<double> *pressures);
+
+// Reads -output_dir.
+PetscErrorCode GetOutputDirectory(MPI_Comm comm, const std::string &fallback, std::string *dir);
+
+// Creates the directory (and parents) and checks that a file can be written
+// in it, without touching any existing file. Collective; errors on every rank.
+PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir);
+
+// True when -help was given: drivers print their options and stop before running.
+bool HelpRequested();
+
+}  // namespace deformix

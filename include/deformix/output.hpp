@@ -1,0 +1,42 @@
+// Results: the per-level curve (CSV) and the deformed meshes (HDF5).
+//
+// curve.csv has a header row and one row per converged pressure level, in
+// the order applied; rows are flushed as they are written so a long run can
+// be followed. The HDF5 file holds one group per level:
+//   /level_NNNN            attributes P_over_E, packing_fraction
+//     /walls               (x_left, x_right, y_bottom, y_top)
+//     /body_K/coordinates  current node coordinates (n_nodes x 2)
+//     /body_K/cells        connectivity (n_cells x nodes per cell)
+//     /body_K/cell_area_ratio   current / reference area per cell (J)
+// Only rank 0 writes (the state is replicated).
+#pragma once
+#include <petscsys.h>
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "deformix/problem.hpp"
+
+namespace deformix {
+
+class CsvWriter {
+ public:
+  CsvWriter() = default;
+  ~CsvWriter();
+  CsvWriter(const CsvWriter &) = delete;
+  CsvWriter &operator=(const CsvWriter &) = delete;
+  PetscErrorCode Open(MPI_Comm comm, const std::string &path, const std::vector<std::string> &columns);
+  PetscErrorCode Row(const std::vector<double> &values);
+
+ private:
+  FILE *file_ = nullptr;
+  size_t ncols_ = 0;
+  MPI_Comm comm_ = MPI_COMM_NULL;
+};
+
+// Appends level `level` to the HDF5 file `path` (created at level 0).
+PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level, double P_over_E,
+                              const CompactionProblem &problem);
+
+}  // namespace deformix

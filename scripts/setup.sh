@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Installs what deformix needs on Debian 12 (as root, idempotent, quiet when
+# everything is there) and builds it in Release into build/.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+packages=(g++ make cmake pkg-config petsc-dev libmetis-dev libhdf5-openmpi-dev openmpi-bin libopenmpi-dev
+          googletest libgtest-dev python3 python3-numpy python3-scipy python3-matplotlib python3-h5py)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" -ne 0 ]; then
+    echo "deformix setup: missing Debian packages: ${missing[*]}; run as root or install them first" >&2
+    exit 1
+  fi
+  echo "deformix setup: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build build -j "$(nproc)" 2>&1 | grep -E "error|Error|Built target" || true
+test -x build/bin/single-particle || { echo "deformix setup: build failed" >&2; exit 1; }

@@ -1,0 +1,40 @@
+#include "deformix/contact_law.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace deformix {
+
+NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n) {
+  NormalNcp r;
+  const double cg = c_n * gap;
+  if (f == NcpFunction::Min) {
+    // A tie (lambda = c_n g, e.g. a closed contact carrying no force yet) is
+    // treated as active so that a touching wall is coupled to the body in the
+    // first Newton step of a load increment.
+    r.active = lambda - cg >= 0.0;
+    if (r.active) {
+      r.value = cg;
+      r.d_gap = c_n;
+    } else {
+      r.value = lambda;
+      r.d_lambda = 1.0;
+    }
+    return r;
+  }
+  // Fischer-Burmeister. At the kink (0, 0) any element of the generalized
+  // Jacobian will do; (1 - 1/sqrt2, 1 - 1/sqrt2) is the limit along the diagonal.
+  const double norm = std::hypot(lambda, cg);
+  r.value = lambda + cg - norm;
+  if (norm > 0.0) {
+    r.d_lambda = 1.0 - lambda / norm;
+    r.d_gap = c_n * (1.0 - cg / norm);
+  } else {
+    r.d_lambda = 1.0 - M_SQRT1_2;
+    r.d_gap = c_n * (1.0 - M_SQRT1_2);
+  }
+  r.active = cg <= lambda;
+  return r;
+}
+
+}  // namespace deformix

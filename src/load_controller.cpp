@@ -1,0 +1,63 @@
+#include "deformix/load_controller.hpp"
+
+#include <cmath>
+
+namespace deformix {
+
+PetscErrorCode LoadControlParameters::SetFromOptions(MPI_Comm comm) {
+  PetscFunctionBeginUser;
+  PetscOptionsBegin(comm, nullptr, "Quasistatic load control", "deformix");
+  PetscCall(PetscOptionsInt("-load_max_cuts", "step halvings allowed per pressure level", "", max_cuts, &max_cuts,
+                            nullptr));
+  PetscCall(PetscOptionsInt("-load_easy_its", "grow the step after sub-steps with at most this many Newton iterations",
+                            "", easy_its, &easy_its, nullptr));
+  PetscCall(PetscOptionsReal("-load_growth", "step growth factor after an easy sub-step", "", growth, &growth, nullptr));
+  PetscOptionsEnd();
+  PetscCheck(max_cuts >= 0, comm, PETSC_ERR_USER_INPUT, "-load_max_cuts must be >= 0");
+  PetscCheck(growth >= 1.0, comm, PETSC_ERR_USER_INPUT, "-load_growth %g must be >= 1", growth);
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlParameters &params, double target,
+                                 double *step, LevelReport *report) {
+  PetscLogDouble t0, t1;
+  PetscFunctionBeginUser;
+  PetscCall(PetscTime(&t0));
+  *report = LevelReport();
+  report->pressure = target;
+  double P = problem.Pressure();
+  const double jump = std::abs(target - P);
+  double dP = (*step > 0.0) ? std::min(*step, jump) : jump;
+  // Pressures closer than this to the target count as the target.
+  const double snap = 1e-12 * std::max(std::abs(target), 1e-300);
+  while (std::abs(target - P) > snap) {
+    const double remaining = std::abs(target - P);
+    const double inc = (remaining - dP <= snap) ? remaining : dP;
+    const double Pnext = P + std::copysign(inc, target - P);
+    SolveReport solve;
+    PetscCall(problem.Solve(Pnext, &solve));
+    report->newton_its += solve.newton_its;
+    if (solve.converged) {
+      P = Pnext;
+      ++report->substeps;
+      if (solve.newton_its <= params.easy_its) dP = inc * params.growth;
+      else dP = inc;
+    } else {
+      ++report->cuts;
+      PetscCall(PetscInfo(nullptr, "sub-step to P = %g failed (%s): halving\n", Pnext, SNESConvergedReasons[solve.reason]));
+      PetscCheck(report->cuts <= params.max_cuts, PETSC_COMM_WORLD, PETSC_ERR_NOT_CONVERGED,
+                 "pressure level P = %g not reached: %d step cuts (last step %g from P = %g, reason %s). Try more "
+                 "-load_max_cuts, smaller pressure increments or -newton_monitor to see the Newton history",
+                 target, report->cuts, inc, P, SNESConvergedReasons[solve.reason]);
+      dP = 0.5 * inc;
+    }
+  }
+  problem.SetPressure(target);
+  *step = dP;
+  report->converged = true;
+  PetscCall(PetscTime(&t1));
+  report->seconds = t1 - t0;
+  PetscFunctionReturn(0);
+}
+
+}  // namespace deformix

@@ -1,0 +1,90 @@
+#include "deformix/options.hpp"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace deformix {
+
+PetscErrorCode GetPressureList(MPI_Comm comm, const std::vector<double> &defaults, std::vector<double> *pressures) {
+  PetscInt n = 256;
+  std::vector<PetscReal> values(n);
+  PetscBool set = PETSC_FALSE;
+  std::string def;
+  for (double p : defaults) def += (def.empty() ? "" : ",") + std::to_string(p);
+  PetscFunctionBeginUser;
+  PetscOptionsBegin(comm, nullptr, "Loading", "deformix");
+  PetscCall(PetscOptionsRealArray("-pressures", "comma-separated list of target P/E levels, applied in order",
+                                  "", values.data(), &n, &set));
+  PetscOptionsEnd();
+  if (!set) {
+    *pressures = defaults;
+    PetscFunctionReturn(0);
+  }
+  PetscCheck(n > 0, comm, PETSC_ERR_USER_INPUT,
+             "-pressures is empty: give at least one P/E value, e.g. -pressures 0.01,0.1,0.5");
+  pressures->assign(values.begin(), values.begin() + n);
+  for (PetscInt i = 0; i < n; ++i)
+    PetscCheck(std::isfinite(values[i]) && values[i] >= 0.0, comm, PETSC_ERR_USER_INPUT,
+               "-pressures entry %" PetscInt_FMT " is %g: pressure levels P/E must be finite and >= 0", i,
+               (double)values[i]);
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode GetOutputDirectory(MPI_Comm comm, const std::string &fallback, std::string *dir) {
+  char buf[PETSC_MAX_PATH_LEN];
+  PetscFunctionBeginUser;
+  PetscCall(PetscStrncpy(buf, fallback.c_str(), sizeof(buf)));
+  PetscOptionsBegin(comm, nullptr, "Output", "deformix");
+  PetscCall(PetscOptionsString("-output_dir", "directory for curve.csv and the HDF5 results", "", buf, buf,
+                               sizeof(buf), nullptr));
+  PetscOptionsEnd();
+  *dir = buf;
+  PetscCheck(!dir->empty(), comm, PETSC_ERR_USER_INPUT, "-output_dir is empty");
+  PetscFunctionReturn(0);
+}
+
+static int MakeDirectories(const std::string &dir) {
+  std::string partial;
+  size_t pos = 0;
+  while (pos != std::string::npos) {
+    pos = dir.find('/', pos + 1);
+    partial = dir.substr(0, pos);
+    if (partial.empty()) continue;
+    if (mkdir(partial.c_str(), 0755) != 0 && errno != EEXIST) return errno;
+  }
+  struct stat st;
+  if (stat(dir.c_str(), &st) != 0) return errno;
+  return S_ISDIR(st.st_mode) ? 0 : ENOTDIR;
+}
+
+PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir) {
+  PetscMPIInt rank;
+  int err = 0;
+  PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  if (rank == 0) {
+    err = MakeDirectories(dir);
+    if (!err) {
+      const std::string probe = dir + "/.deformix-write-test-" + std::to_string(getpid());
+      FILE *f = std::fopen(probe.c_str(), "w");
+      if (!f) err = errno;
+      else std::fclose(f), std::remove(probe.c_str());
+    }
+  }
+  PetscCallMPI(MPI_Bcast(&err, 1, MPI_INT, 0, comm));
+  PetscCheck(err == 0, comm, PETSC_ERR_FILE_OPEN, "-output_dir '%s' cannot be written: %s", dir.c_str(),
+             std::strerror(err));
+  PetscFunctionReturn(0);
+}
+
+bool HelpRequested() {
+  PetscBool help = PETSC_FALSE;
+  PetscOptionsHasHelp(nullptr, &help);
+  return help;
+}
+
+}  // namespace deformix
