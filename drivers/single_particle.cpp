@@ -10,7 +10,9 @@ static const char help[] =
     "Examples:\n"
     "  build/bin/single-particle -mesh_triangles 92 -output_dir out/sp\n"
     "  build/bin/single-particle -pressures 0.5 -nu 0.4999 -newton_monitor\n"
-    "  mpirun -n 2 build/bin/single-particle -options_file petsc-options/single-particle.opts\n\n";
+    "  mpirun -n 2 build/bin/single-particle -options_file petsc-options/single-particle.opts\n\n"
+    "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
+    "each Newton iteration with the number of active contacts.\n\n";
 
 #include <petscsnes.h>
 

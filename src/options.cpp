@@ -14,11 +14,15 @@ PetscErrorCode GetPressureList(MPI_Comm comm, const std::vector<double> &default
   std::vector<PetscReal> values(n);
   PetscBool set = PETSC_FALSE;
   std::string def;
-  for (double p : defaults) def += (def.empty() ? "" : ",") + std::to_string(p);
+  for (double p : defaults) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%g", p);
+    def += (def.empty() ? "" : ",") + std::string(buf);
+  }
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Loading", "deformix");
-  PetscCall(PetscOptionsRealArray("-pressures", "comma-separated list of target P/E levels, applied in order",
-                                  "", values.data(), &n, &set));
+  const std::string text = "comma-separated list of target P/E levels, applied in order (default " + def + ")";
+  PetscCall(PetscOptionsRealArray("-pressures", text.c_str(), "", values.data(), &n, &set));
   PetscOptionsEnd();
   if (!set) {
     *pressures = defaults;
