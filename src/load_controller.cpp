@@ -7,7 +7,7 @@ namespace deformix {
 PetscErrorCode LoadControlParameters::SetFromOptions(MPI_Comm comm) {
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Quasistatic load control", "deformix");
-  PetscCall(PetscOptionsInt("-load_max_cuts", "step halvings allowed per pressure level", "", max_cuts, &max_cuts,
+  PetscCall(PetscOptionsInt("-load_max_cuts", "consecutive step halvings allowed before a level is declared failed", "", max_cuts, &max_cuts,
                             nullptr));
   PetscCall(PetscOptionsInt("-load_easy_its", "grow the step after sub-steps with at most this many Newton iterations",
                             "", easy_its, &easy_its, nullptr));
@@ -30,6 +30,7 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
   double dP = (*step > 0.0) ? std::min(*step, jump) : jump;
   // Pressures closer than this to the target count as the target.
   const double snap = 1e-12 * std::max(std::abs(target), 1e-300);
+  int cuts_in_a_row = 0;
   while (std::abs(target - P) > snap) {
     const double remaining = std::abs(target - P);
     const double inc = (remaining - dP <= snap) ? remaining : dP;
@@ -40,15 +41,17 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
     if (solve.converged) {
       P = Pnext;
       ++report->substeps;
+      cuts_in_a_row = 0;
       if (solve.newton_its <= params.easy_its) dP = inc * params.growth;
       else dP = inc;
     } else {
       ++report->cuts;
+      ++cuts_in_a_row;
       PetscCall(PetscInfo(nullptr, "sub-step to P = %g failed (%s): halving\n", Pnext, SNESConvergedReasons[solve.reason]));
-      PetscCheck(report->cuts <= params.max_cuts, PETSC_COMM_WORLD, PETSC_ERR_NOT_CONVERGED,
-                 "pressure level P = %g not reached: %d step cuts (last step %g from P = %g, reason %s). Try more "
-                 "-load_max_cuts, smaller pressure increments or -newton_monitor to see the Newton history",
-                 target, report->cuts, inc, P, SNESConvergedReasons[solve.reason]);
+      PetscCheck(cuts_in_a_row <= params.max_cuts, PETSC_COMM_WORLD, PETSC_ERR_NOT_CONVERGED,
+                 "pressure level P = %g not reached: %d step cuts in a row (last step %g from P = %g, reason %s). "
+                 "Try more -load_max_cuts, smaller pressure increments or -newton_monitor to see the Newton history",
+                 target, cuts_in_a_row, inc, P, SNESConvergedReasons[solve.reason]);
       dP = 0.5 * inc;
     }
   }

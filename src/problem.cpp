@@ -8,6 +8,23 @@
 
 namespace deformix {
 
+namespace {
+// -log_view events: where the time of a solve goes besides the factorization.
+PetscLogEvent event_residual = 0, event_jacobian = 0, event_detect = 0;
+PetscErrorCode RegisterEvents() {
+  static bool registered = false;
+  PetscClassId id;
+  PetscFunctionBeginUser;
+  if (registered) PetscFunctionReturn(0);
+  PetscCall(PetscClassIdRegister("deformix", &id));
+  PetscCall(PetscLogEventRegister("AssembleResidual", id, &event_residual));
+  PetscCall(PetscLogEventRegister("AssembleJacobian", id, &event_jacobian));
+  PetscCall(PetscLogEventRegister("ContactDetect", id, &event_detect));
+  registered = true;
+  PetscFunctionReturn(0);
+}
+}  // namespace
+
 PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscBool set = PETSC_FALSE;
   PetscInt ncp_choice = ncp == NcpFunction::Min ? 0 : 1;
@@ -26,6 +43,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsBool("-constrain_rotation",
                              "fix the mean rotation of frictionless deformable bodies (zero-energy mode; its torque is reported)",
                              "", constrain_rotation, &constrain_rotation, nullptr));
+  PetscCall(PetscOptionsBool("-secant_predictor", "start each increment from the secant extrapolation of the last two states",
+                             "", secant_predictor, &secant_predictor, nullptr));
   PetscCall(PetscOptionsReal("-contact_margin", "contact candidates: gap below margin x mean diameter", "",
                              contact_margin, &contact_margin, nullptr));
   PetscOptionsEnd();
@@ -41,6 +60,7 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
 }
 
 CompactionProblem::CompactionProblem(MPI_Comm comm) : comm_(comm) {
+  RegisterEvents();
   MPI_Comm_rank(comm, &rank_);
   MPI_Comm_size(comm, &size_);
   material_ = NeoHookean::from_young_poisson(params_.young, params_.poisson);
@@ -175,6 +195,7 @@ std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin)
 
 PetscErrorCode CompactionProblem::RefreshCandidates() {
   PetscFunctionBeginUser;
+  PetscCall(PetscLogEventBegin(event_detect, 0, 0, 0, 0));
   auto key = [](const ContactCandidate &c) { return std::make_tuple(c.body, c.point, static_cast<int>(c.wall)); };
   std::map<std::tuple<int, int, int>, double> old;
   for (size_t c = 0; c < candidates_.size(); ++c) old[key(candidates_[c])] = lambda_[c];
@@ -189,15 +210,17 @@ PetscErrorCode CompactionProblem::RefreshCandidates() {
   std::sort(fresh.begin(), fresh.end(), [&](const ContactCandidate &a, const ContactCandidate &b) { return key(a) < key(b); });
   bool same = fresh.size() == candidates_.size();
   for (size_t c = 0; same && c < fresh.size(); ++c) same = key(fresh[c]) == key(candidates_[c]);
-  if (same) PetscFunctionReturn(0);
-  std::vector<double> lam(fresh.size(), 0.0);
-  for (size_t c = 0; c < fresh.size(); ++c) {
-    auto it = old.find(key(fresh[c]));
-    if (it != old.end()) lam[c] = it->second;
+  if (!same) {
+    std::vector<double> lam(fresh.size(), 0.0);
+    for (size_t c = 0; c < fresh.size(); ++c) {
+      auto it = old.find(key(fresh[c]));
+      if (it != old.end()) lam[c] = it->second;
+    }
+    candidates_ = std::move(fresh);
+    lambda_ = std::move(lam);
+    PetscCall(DestroySolver());
   }
-  candidates_ = std::move(fresh);
-  lambda_ = std::move(lam);
-  PetscCall(DestroySolver());
+  PetscCall(PetscLogEventEnd(event_detect, 0, 0, 0, 0));
   PetscFunctionReturn(0);
 }
 
@@ -351,6 +374,7 @@ PetscErrorCode FormFunction(SNES snes, Vec z, Vec F, void *ctx) {
   PetscScalar *fa;
   bool inverted = false;
   PetscFunctionBeginUser;
+  PetscCall(PetscLogEventBegin(event_residual, 0, 0, 0, 0));
   PetscCall(p->Gather(z));
   PetscCall(VecGetArrayRead(p->zall_, &za));
   PetscCall(VecSet(F, 0.0));
@@ -361,6 +385,7 @@ PetscErrorCode FormFunction(SNES snes, Vec z, Vec F, void *ctx) {
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &inverted, 1, MPI_C_BOOL, MPI_LOR, p->comm_));
   p->inverted_ = inverted;
   if (inverted && snes) PetscCall(SNESSetFunctionDomainError(snes));
+  PetscCall(PetscLogEventEnd(event_residual, 0, 0, 0, 0));
   PetscFunctionReturn(0);
 }
 
@@ -368,12 +393,14 @@ PetscErrorCode FormJacobian(SNES, Vec z, Mat J, Mat, void *ctx) {
   auto *p = static_cast<CompactionProblem *>(ctx);
   const PetscScalar *za;
   PetscFunctionBeginUser;
+  PetscCall(PetscLogEventBegin(event_jacobian, 0, 0, 0, 0));
   PetscCall(p->Gather(z));
   PetscCall(VecGetArrayRead(p->zall_, &za));
   p->coo_values_.clear();
   PetscCall(p->Assemble(za, nullptr, nullptr, nullptr, &p->coo_values_, nullptr, nullptr));
   PetscCall(VecRestoreArrayRead(p->zall_, &za));
   PetscCall(MatSetValuesCOO(J, p->coo_values_.data(), INSERT_VALUES));
+  PetscCall(PetscLogEventEnd(event_jacobian, 0, 0, 0, 0));
   PetscFunctionReturn(0);
 }
 
@@ -500,6 +527,14 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   PetscFunctionBeginUser;
   *report = SolveReport();
   const State saved = SaveState();
+  const double saved_pressure = pressure_;
+  // Secant predictor along the load path: extrapolate the bodies and walls
+  // from the last two converged states (none for the first increment).
+  if (params_.secant_predictor && have_previous_ && pressure_ != previous_pressure_) {
+    const double t = (pressure - pressure_) / (pressure_ - previous_pressure_);
+    for (size_t i = 0; i < u_.size(); ++i) u_[i] += t * (u_[i] - previous_.u[i]);
+    for (int k = 0; k < 4; ++k) w_[k] += t * (w_[k] - previous_.w[k]);
+  }
   pressure_ = pressure;
   PetscCall(RefreshCandidates());
   for (int refresh = 0;; ++refresh) {
@@ -514,6 +549,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     PetscCall(SNESGetFunctionNorm(snes_, &report->residual));
     if (report->reason <= 0) {
       RestoreState(saved);
+      pressure_ = saved_pressure;
       PetscFunctionReturn(0);
     }
     PetscCall(Gather(z_));
@@ -537,6 +573,9 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     ++report->candidate_refreshes;
   }
   report->converged = true;
+  previous_ = saved;
+  previous_pressure_ = saved_pressure;
+  have_previous_ = true;
   for (char a : active_now_) report->active_contacts += a;
   PetscFunctionReturn(0);
 }

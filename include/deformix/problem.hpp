@@ -54,7 +54,8 @@ struct ProblemParameters {
   double ncp_scale = 1.0;        // c_n = ncp_scale * E
   double prox_eta = 1e-8;        // rho = prox_eta * E
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
-  PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
+  PetscBool constrain_rotation = PETSC_TRUE;
+  PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path  // rotation gauge for frictionless deformable bodies
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
 
@@ -193,6 +194,9 @@ class CompactionProblem {
   std::vector<double> u_;  // body displacements (replicated)
   double w_[4] = {0, 0, 0, 0};
   double pressure_ = 0.0;
+  State previous_;                 // last converged state before the current one (predictor)
+  double previous_pressure_ = 0.0;
+  bool have_previous_ = false;
   double mean_diameter_ = 1.0;
   std::vector<ContactCandidate> candidates_;
   std::vector<double> lambda_;
