@@ -16,6 +16,7 @@ static const char help[] =
 
 #include <petscsnes.h>
 
+#include <algorithm>
 #include <cmath>
 #include <exception>
 #include <string>
@@ -73,6 +74,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(params.SetFromOptions(comm));
   PetscCall(load.SetFromOptions(comm));
   if (HelpRequested()) PetscFunctionReturn(0);
+  PetscCall(CheckUnknownOptions(comm));
   PetscCall(PrepareOutputDirectory(comm, opts.output_dir));
   PetscCall(PetscLogStageRegister("Solve", &stage_solve));
   PetscCall(PetscLogStageRegister("Output", &stage_output));
@@ -88,7 +90,16 @@ PetscErrorCode Run(MPI_Comm comm) {
   CompactionProblem problem(comm);
   PetscCall(problem.SetParameters(params));
   problem.AddDeformableBody(mesh, 0.0, 0.0);
-  const double walls[4] = {-radius, radius, -radius, radius};
+  // The walls touch the discrete disk: the bounding box of its boundary contact
+  // points (nodes, and the control points of curved edges), which is the
+  // disk's diameter whenever a vertex sits at 0, 90, 180 and 270 degrees.
+  double walls[4] = {INFINITY, -INFINITY, INFINITY, -INFINITY};
+  for (int i = 0; i < static_cast<int>(mesh.boundary.size()); ++i) {
+    double x[2];
+    problem.BoundaryPointPosition(0, i, x);
+    walls[kLeft] = std::min(walls[kLeft], x[0]), walls[kRight] = std::max(walls[kRight], x[0]);
+    walls[kBottom] = std::min(walls[kBottom], x[1]), walls[kTop] = std::max(walls[kTop], x[1]);
+  }
   problem.SetWalls(walls);
   const StateSummary s0 = problem.Summary();
   PetscCall(PetscPrintf(comm,
@@ -103,6 +114,8 @@ PetscErrorCode Run(MPI_Comm comm) {
                        {"P_over_E", "phi", "area_ratio", "newton_its", "seconds", "substeps", "cuts", "box_width",
                         "box_height", "wall_force_error", "max_penetration", "min_cell_area_ratio", "active_contacts"}));
   const std::string h5 = opts.output_dir + "/levels.h5";
+  // Results of an earlier run in this directory must not mix with this one.
+  PetscCall(RemoveFile(comm, h5));
   PetscCall(PetscPrintf(comm, "  %10s %10s %10s %6s %6s %9s\n", "P/E", "phi_p", "area_ratio", "newton", "steps",
                         "seconds"));
   double step = -1.0;

@@ -37,4 +37,29 @@ NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n) {
   return r;
 }
 
+TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double slip, double mu, double c_n,
+                          double c_t) {
+  TangentialNcp r;
+  const double a = lambda_n - c_n * gap;
+  if (!(a > 0.0)) {
+    r.value = lambda_t;
+    r.d_lambda_t = 1.0;
+    return r;
+  }
+  const double bound = mu * a, trial = lambda_t - c_t * slip;
+  if (std::abs(trial) <= bound) {
+    r.state = kClosed;
+    r.value = c_t * slip;
+    r.d_slip = c_t;
+    return r;
+  }
+  const double sigma = trial > 0.0 ? 1.0 : -1.0;
+  r.state = kSliding;
+  r.value = lambda_t - sigma * bound;
+  r.d_lambda_t = 1.0;
+  r.d_lambda_n = -sigma * mu;
+  r.d_gap = sigma * mu * c_n;
+  return r;
+}
+
 }  // namespace deformix

@@ -31,6 +31,7 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
   // Pressures closer than this to the target count as the target.
   const double snap = 1e-12 * std::max(std::abs(target), 1e-300);
   int cuts_in_a_row = 0;
+  const double min_step = std::ldexp(jump, -static_cast<int>(params.max_cuts));
   while (std::abs(target - P) > snap) {
     const double remaining = std::abs(target - P);
     const double inc = (remaining - dP <= snap) ? remaining : dP;
@@ -48,8 +49,10 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
       ++report->cuts;
       ++cuts_in_a_row;
       PetscCall(PetscInfo(nullptr, "sub-step to P = %g failed (%s): halving\n", Pnext, SNESConvergedReasons[solve.reason]));
-      PetscCheck(cuts_in_a_row <= params.max_cuts, PETSC_COMM_WORLD, PETSC_ERR_NOT_CONVERGED,
-                 "pressure level P = %g not reached: %d step cuts in a row (last step %g from P = %g, reason %s). "
+      // A level fails when the step has been halved max_cuts times in a row, or
+      // has become smaller than jump / 2^max_cuts (creeping towards a limit load).
+      PetscCheck(cuts_in_a_row <= params.max_cuts && 0.5 * inc >= min_step, PETSC_COMM_WORLD, PETSC_ERR_NOT_CONVERGED,
+                 "pressure level P = %g not reached: %d step cuts in a row, last step %g from P = %g (reason %s). "
                  "Try more -load_max_cuts, smaller pressure increments or -newton_monitor to see the Newton history",
                  target, cuts_in_a_row, inc, P, SNESConvergedReasons[solve.reason]);
       dP = 0.5 * inc;

@@ -24,6 +24,11 @@ PetscErrorCode GetPressureList(MPI_Comm comm, const std::vector<double> &default
   const std::string text = "comma-separated list of target P/E levels, applied in order (default " + def + ")";
   PetscCall(PetscOptionsRealArray("-pressures", text.c_str(), "", values.data(), &n, &set));
   PetscOptionsEnd();
+  // "-pressures" given without a value (or as '') comes back as not set.
+  PetscBool given = PETSC_FALSE;
+  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-pressures", &given));
+  PetscCheck(!given || (set && n > 0), comm, PETSC_ERR_USER_INPUT,
+             "-pressures is empty: give at least one P/E value, e.g. -pressures 0.01,0.1,0.5");
   if (!set) {
     *pressures = defaults;
     PetscFunctionReturn(0);
@@ -82,6 +87,32 @@ PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir) {
   PetscCallMPI(MPI_Bcast(&err, 1, MPI_INT, 0, comm));
   PetscCheck(err == 0, comm, PETSC_ERR_FILE_OPEN, "-output_dir '%s' cannot be written: %s", dir.c_str(),
              std::strerror(err));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
+  // Prefixes of options read after start-up: by the SNES / KSP / PC / Mat of
+  // each solve, the Jacobian (jac_), logging, viewers and PETSc's own run-time.
+  static const char *const later[] = {"snes_", "ksp_", "pc_", "mat_", "jac_", "log", "info", "options_", "malloc",
+                                      "help", "version", "on_error", "no_signal_handler", "fp_trap", "memory_view",
+                                      "viewer", "draw", "vec_", "petsc", "check_pointer", "device_", "root_device",
+                                      "newton_monitor", "mpi", "start_in_debugger", "debugger", "stop_for_debugger",
+                                      "history", "tmp", "shared_tmp", "not_shared_tmp", "skip_petscrc",
+                                      "objects_dump", "checkstack", "get_total_flops", "use_gpu_aware_mpi", "saws",
+                                      "display", "nox", "x_virtual", "python", "dm_", "is_", "sf_", "options_file"};
+  PetscInt n;
+  char **names, **values;
+  std::string unknown;
+  PetscFunctionBeginUser;
+  PetscCall(PetscOptionsLeftGet(nullptr, &n, &names, &values));
+  for (PetscInt i = 0; i < n; ++i) {
+    bool known = false;
+    for (const char *p : later) known = known || std::strncmp(names[i], p, std::strlen(p)) == 0;
+    if (!known) unknown += std::string(unknown.empty() ? "" : ", ") + "-" + names[i];
+  }
+  PetscCall(PetscOptionsLeftRestore(nullptr, &n, &names, &values));
+  PetscCheck(unknown.empty(), comm, PETSC_ERR_USER_INPUT,
+             "unknown option(s) %s: check the spelling against -help", unknown.c_str());
   PetscFunctionReturn(0);
 }
 

@@ -40,6 +40,14 @@ PetscErrorCode CsvWriter::Row(const std::vector<double> &values) {
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode RemoveFile(MPI_Comm comm, const std::string &path) {
+  PetscMPIInt rank;
+  PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  if (rank == 0) std::remove(path.c_str());
+  PetscFunctionReturn(0);
+}
+
 namespace {
 
 herr_t WriteDataset(hid_t group, const char *name, hid_t type, int rows, int cols, const void *data) {
@@ -93,6 +101,15 @@ PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level,
              WriteDataset(gb, "cells", H5T_NATIVE_INT, nc, nen, body.mesh.cells.data()) >= 0 &&
              WriteDataset(gb, "cell_area_ratio", H5T_NATIVE_DOUBLE, nc, 1, J.data()) >= 0;
         if (gb >= 0) H5Gclose(gb);
+      }
+      const std::vector<RigidBody> &rigid = problem.RigidBodies();
+      if (ok && !rigid.empty()) {
+        std::vector<double> xr(4 * rigid.size());
+        for (size_t r = 0; r < rigid.size(); ++r) {
+          problem.RigidPosition(static_cast<int>(r), &xr[4 * r], &xr[4 * r + 3]);
+          xr[4 * r + 2] = rigid[r].radius;
+        }
+        ok = WriteDataset(g, "rigid", H5T_NATIVE_DOUBLE, static_cast<int>(rigid.size()), 4, xr.data()) >= 0;
       }
       if (g >= 0) H5Gclose(g);
       H5Fclose(file);

@@ -23,6 +23,12 @@ PetscErrorCode RegisterEvents() {
   registered = true;
   PetscFunctionReturn(0);
 }
+
+// Identity of a candidate across refreshes (the segment of a node-segment
+// pair may change while the multiplier carries over).
+std::tuple<int, int, int, int, int> CandidateKey(const ContactCandidate &c) {
+  return std::make_tuple(static_cast<int>(c.type), c.body, c.point, static_cast<int>(c.wall), c.master);
+}
 }  // namespace
 
 PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
@@ -34,12 +40,17 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsReal("-E", "Young's modulus of the deformable disks", "", young, &young, nullptr));
   PetscCall(PetscOptionsReal("-nu", "Poisson's ratio of the deformable disks (-1 < nu < 0.5)", "", poisson, &poisson,
                              nullptr));
+  PetscCall(PetscOptionsReal("-friction", "Coulomb friction coefficient between particles (walls are frictionless)",
+                             "", friction, &friction, nullptr));
   PetscCall(PetscOptionsEList("-contact_ncp", "NCP function of the normal contact law", "", ncp_names, 2,
                               ncp_names[ncp_choice], &ncp_choice, &set));
-  PetscCall(PetscOptionsReal("-contact_ncp_scale", "c_n / E in the NCP function (changes the Newton path only)", "",
+  PetscCall(PetscOptionsReal("-contact_ncp_scale", "c_n / E in the NCP functions (changes the Newton path only)", "",
                              ncp_scale, &ncp_scale, nullptr));
   PetscCall(PetscOptionsReal("-prox_eta", "proximal regularization of the Newton step, rho / E (vanishes at equilibrium)",
                              "", prox_eta, &prox_eta, nullptr));
+  PetscCall(PetscOptionsReal("-prox_initial",
+                             "proximal weight at the first Newton iterate of a solve, rho_0 / P; it then falls with the residual",
+                             "", prox_initial, &prox_initial, nullptr));
   PetscCall(PetscOptionsBool("-constrain_rotation",
                              "fix the mean rotation of frictionless deformable bodies (zero-energy mode; its torque is reported)",
                              "", constrain_rotation, &constrain_rotation, nullptr));
@@ -53,8 +64,11 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCheck(poisson > -1.0 && poisson < 0.5, comm, PETSC_ERR_USER_INPUT,
              "-nu %g: Poisson's ratio must satisfy -1 < nu < 0.5 (nu = 0.5 is incompressible, use e.g. 0.4999)",
              poisson);
+  PetscCheck(friction >= 0.0 && std::isfinite(friction), comm, PETSC_ERR_USER_INPUT,
+             "-friction %g: the friction coefficient must be >= 0 (the paper uses 0 to 0.8)", friction);
   PetscCheck(ncp_scale > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_ncp_scale %g must be positive", ncp_scale);
   PetscCheck(prox_eta >= 0.0, comm, PETSC_ERR_USER_INPUT, "-prox_eta %g must be >= 0", prox_eta);
+  PetscCheck(prox_initial >= 0.0, comm, PETSC_ERR_USER_INPUT, "-prox_initial %g must be >= 0", prox_initial);
   PetscCheck(contact_margin > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_margin %g must be positive", contact_margin);
   PetscFunctionReturn(0);
 }
@@ -70,11 +84,20 @@ CompactionProblem::~CompactionProblem() { DestroySolver(); }
 
 PetscErrorCode CompactionProblem::SetParameters(const ProblemParameters &p) {
   PetscFunctionBeginUser;
+  PetscCheck(rigid_.empty() || (p.friction > 0.0) == Frictional(), comm_, PETSC_ERR_ORDER,
+             "set the friction before adding rigid bodies (it decides their rotation unknowns)");
   params_ = p;
   material_ = NeoHookean::from_young_poisson(p.young, p.poisson);
   torque_.assign(params_.constrain_rotation ? bodies_.size() : 0, 0.0);
   PetscCall(DestroySolver());
   PetscFunctionReturn(0);
+}
+
+static double MeanDiameter(const std::vector<DeformableBody> &d, const std::vector<RigidBody> &r) {
+  double sum = 0.0;
+  for (const auto &b : d) sum += 2.0 * b.mesh.radius;
+  for (const auto &b : r) sum += 2.0 * b.radius;
+  return (d.size() + r.size()) ? sum / (d.size() + r.size()) : 1.0;
 }
 
 int CompactionProblem::AddDeformableBody(const DiskMesh &mesh, double cx, double cy) {
@@ -83,6 +106,7 @@ int CompactionProblem::AddDeformableBody(const DiskMesh &mesh, double cx, double
   body.center[0] = cx;
   body.center[1] = cy;
   body.dof_offset = n_body_dofs_;
+  body.particle = NumParticles();
   const int nen = mesh.nodes_per_cell();
   std::vector<double> Xe(2 * nen);
   for (int e = 0; e < mesh.num_cells(); ++e) {
@@ -98,12 +122,25 @@ int CompactionProblem::AddDeformableBody(const DiskMesh &mesh, double cx, double
   n_body_dofs_ += 2 * mesh.num_nodes();
   u_.resize(n_body_dofs_, 0.0);
   bodies_.push_back(std::move(body));
-  double dsum = 0.0;
-  for (const auto &b : bodies_) dsum += 2.0 * b.mesh.radius;
-  mean_diameter_ = dsum / bodies_.size();
+  mean_diameter_ = MeanDiameter(bodies_, rigid_);
   torque_.assign(params_.constrain_rotation ? bodies_.size() : 0, 0.0);
   DestroySolver();
   return static_cast<int>(bodies_.size()) - 1;
+}
+
+int CompactionProblem::AddRigidBody(double cx, double cy, double radius) {
+  RigidBody body;
+  body.center[0] = cx;
+  body.center[1] = cy;
+  body.radius = radius;
+  body.dof_offset = n_body_dofs_;
+  body.particle = NumParticles();
+  n_body_dofs_ += RigidDofs();
+  u_.resize(n_body_dofs_, 0.0);
+  rigid_.push_back(body);
+  mean_diameter_ = MeanDiameter(bodies_, rigid_);
+  DestroySolver();
+  return static_cast<int>(rigid_.size()) - 1;
 }
 
 void CompactionProblem::SetWalls(const double w[4]) { std::copy(w, w + 4, w_); }
@@ -113,6 +150,23 @@ void CompactionProblem::NodePosition(int b, int a, double x[2]) const {
   const PetscInt d = body.dof_offset + 2 * a;
   x[0] = body.center[0] + body.mesh.X[2 * a] + u_[d];
   x[1] = body.center[1] + body.mesh.X[2 * a + 1] + u_[d + 1];
+}
+
+void CompactionProblem::RigidPosition(int r, double x[2], double *theta) const {
+  const RigidBody &body = rigid_[r];
+  x[0] = body.center[0] + u_[body.dof_offset];
+  x[1] = body.center[1] + u_[body.dof_offset + 1];
+  if (theta) *theta = Frictional() ? u_[body.dof_offset + 2] : 0.0;
+}
+
+void CompactionProblem::BodyCentroid(int b, double x[2]) const {
+  const int nn = bodies_[b].mesh.num_nodes();
+  x[0] = x[1] = 0.0;
+  for (int a = 0; a < nn; ++a) {
+    double xa[2];
+    NodePosition(b, a, xa);
+    x[0] += xa[0] / nn, x[1] += xa[1] / nn;
+  }
 }
 
 BoundaryPoint boundary_point(const DiskMesh &mesh, int i) {
@@ -139,19 +193,23 @@ void CompactionProblem::BoundaryPointPosition(int b, int i, double x[2]) const {
 }
 
 // ---------------------------------------------------------------------------
-// State packing. Global unknown order: bodies' displacements, 4 walls, multipliers.
+// State packing, in the global unknown order.
 void CompactionProblem::Pack(double *z) const {
   std::copy(u_.begin(), u_.end(), z);
-  std::copy(w_, w_ + 4, z + n_body_dofs_);
-  std::copy(torque_.begin(), torque_.end(), z + n_body_dofs_ + 4);
+  std::copy(w_, w_ + 4, z + WallOffset());
+  std::copy(torque_.begin(), torque_.end(), z + GaugeOffset());
   std::copy(lambda_.begin(), lambda_.end(), z + MultiplierOffset());
+  for (size_t c = 0; c < candidates_.size(); ++c)
+    if (tangential_index_[c] >= 0) z[tangential_index_[c]] = lambda_t_[c];
 }
 
 void CompactionProblem::Unpack(const double *z) {
   std::copy(z, z + n_body_dofs_, u_.begin());
-  std::copy(z + n_body_dofs_, z + n_body_dofs_ + 4, w_);
-  std::copy(z + n_body_dofs_ + 4, z + MultiplierOffset(), torque_.begin());
+  std::copy(z + WallOffset(), z + WallOffset() + 4, w_);
+  std::copy(z + GaugeOffset(), z + MultiplierOffset(), torque_.begin());
   std::copy(z + MultiplierOffset(), z + MultiplierOffset() + lambda_.size(), lambda_.begin());
+  for (size_t c = 0; c < candidates_.size(); ++c)
+    lambda_t_[c] = tangential_index_[c] >= 0 ? z[tangential_index_[c]] : 0.0;
 }
 
 CompactionProblem::State CompactionProblem::SaveState() const {
@@ -159,6 +217,7 @@ CompactionProblem::State CompactionProblem::SaveState() const {
   s.u = u_;
   std::copy(w_, w_ + 4, s.w);
   s.lambda = lambda_;
+  s.lambda_t = lambda_t_;
   s.torque = torque_;
   s.candidates = candidates_;
   return s;
@@ -167,57 +226,43 @@ CompactionProblem::State CompactionProblem::SaveState() const {
 void CompactionProblem::RestoreState(const State &s) {
   u_ = s.u;
   std::copy(s.w, s.w + 4, w_);
-  if (s.candidates.size() != candidates_.size()) DestroySolver();
+  bool same = s.candidates.size() == candidates_.size();
+  for (size_t c = 0; same && c < candidates_.size(); ++c)
+    same = CandidateKey(s.candidates[c]) == CandidateKey(candidates_[c]) && s.candidates[c].segment == candidates_[c].segment;
+  if (!same) DestroySolver();
   candidates_ = s.candidates;
   lambda_ = s.lambda;
+  lambda_t_ = s.lambda_t;
   torque_ = s.torque;
 }
 
 // ---------------------------------------------------------------------------
-// Contact candidates: every boundary node against every wall closer than the
-// margin. Cheap here (O(boundary nodes)); the mixture replaces it with a
-// cell-list broad phase.
-std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin) const {
-  std::vector<ContactCandidate> out;
-  const double reach = margin * mean_diameter_;
-  for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) {
-    for (int i = 0; i < static_cast<int>(bodies_[b].mesh.boundary.size()); ++i) {
-      double x[2];
-      BoundaryPointPosition(b, i, x);
-      double gaps[4];
-      WallBox::point_gaps(x, w_, gaps);
-      for (int k = 0; k < 4; ++k)
-        if (gaps[k] < reach) out.push_back({b, i, static_cast<Wall>(k)});
-    }
-  }
-  return out;
-}
-
 PetscErrorCode CompactionProblem::RefreshCandidates() {
   PetscFunctionBeginUser;
   PetscCall(PetscLogEventBegin(event_detect, 0, 0, 0, 0));
-  auto key = [](const ContactCandidate &c) { return std::make_tuple(c.body, c.point, static_cast<int>(c.wall)); };
-  std::map<std::tuple<int, int, int>, double> old;
-  for (size_t c = 0; c < candidates_.size(); ++c) old[key(candidates_[c])] = lambda_[c];
+  std::map<std::tuple<int, int, int, int, int>, std::pair<double, double>> old;
+  for (size_t c = 0; c < candidates_.size(); ++c) old[CandidateKey(candidates_[c])] = {lambda_[c], lambda_t_[c]};
   std::vector<ContactCandidate> fresh = DetectCandidates(params_.contact_margin);
   // A candidate that still carries force stays, whatever its gap.
-  for (size_t c = 0; c < candidates_.size(); ++c) {
-    if (lambda_[c] <= 0.0) continue;
-    const auto k = key(candidates_[c]);
-    if (std::none_of(fresh.begin(), fresh.end(), [&](const ContactCandidate &f) { return key(f) == k; }))
-      fresh.push_back(candidates_[c]);
-  }
-  std::sort(fresh.begin(), fresh.end(), [&](const ContactCandidate &a, const ContactCandidate &b) { return key(a) < key(b); });
+  std::map<std::tuple<int, int, int, int, int>, int> fresh_keys;
+  for (size_t c = 0; c < fresh.size(); ++c) fresh_keys[CandidateKey(fresh[c])] = static_cast<int>(c);
+  for (size_t c = 0; c < candidates_.size(); ++c)
+    if (lambda_[c] > 0.0 && !fresh_keys.count(CandidateKey(candidates_[c]))) fresh.push_back(candidates_[c]);
+  std::sort(fresh.begin(), fresh.end(), [](const ContactCandidate &a, const ContactCandidate &b) {
+    return CandidateKey(a) < CandidateKey(b);
+  });
   bool same = fresh.size() == candidates_.size();
-  for (size_t c = 0; same && c < fresh.size(); ++c) same = key(fresh[c]) == key(candidates_[c]);
+  for (size_t c = 0; same && c < fresh.size(); ++c)
+    same = CandidateKey(fresh[c]) == CandidateKey(candidates_[c]) && fresh[c].segment == candidates_[c].segment;
   if (!same) {
-    std::vector<double> lam(fresh.size(), 0.0);
+    std::vector<double> lam(fresh.size(), 0.0), lam_t(fresh.size(), 0.0);
     for (size_t c = 0; c < fresh.size(); ++c) {
-      auto it = old.find(key(fresh[c]));
-      if (it != old.end()) lam[c] = it->second;
+      auto it = old.find(CandidateKey(fresh[c]));
+      if (it != old.end()) lam[c] = it->second.first, lam_t[c] = it->second.second;
     }
     candidates_ = std::move(fresh);
     lambda_ = std::move(lam);
+    lambda_t_ = std::move(lam_t);
     PetscCall(DestroySolver());
   }
   PetscCall(PetscLogEventEnd(event_detect, 0, 0, 0, 0));
@@ -225,24 +270,120 @@ PetscErrorCode CompactionProblem::RefreshCandidates() {
 }
 
 // ---------------------------------------------------------------------------
+// Kinematics of one candidate: gap, slip and derivatives on its global unknowns.
+void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc) const {
+  const double *z0 = u_start_.empty() ? z : u_start_.data();  // slip reference: the start of the step
+  double q[6] = {0, 0, 0, 0, 0, 0}, q0[6] = {0, 0, 0, 0, 0, 0};
+  int nq = 0;
+  auto add_node = [&](const DeformableBody &body, int node) {
+    for (int i = 0; i < 2; ++i) {
+      const PetscInt d = body.dof_offset + 2 * node + i;
+      lc->dofs[nq] = d;
+      q[nq] = body.center[i] + body.mesh.X[2 * node + i] + z[d];
+      q0[nq] = body.center[i] + body.mesh.X[2 * node + i] + z0[d];
+      ++nq;
+    }
+  };
+  auto add_rigid = [&](const RigidBody &body) {
+    for (int i = 0; i < 3; ++i) {
+      const bool present = i < 2 || Frictional();
+      const PetscInt d = body.dof_offset + i;
+      const double ref = i < 2 ? body.center[i] : 0.0;
+      lc->dofs[nq] = present ? d : -1;
+      q[nq] = present ? ref + z[d] : 0.0;
+      q0[nq] = present ? ref + z0[d] : 0.0;
+      ++nq;
+    }
+  };
+  const double *w = z + WallOffset();
+  const PetscInt wall_dof = WallOffset() + c.wall;
+  lc->frictional = HasTangential(c);
+  lc->curved = false;
+  lc->k = PairKinematics();
+  for (PetscInt &d : lc->dofs) d = -1;
+  switch (c.type) {
+    case ContactType::PointWall: {
+      const DeformableBody &body = bodies_[c.body];
+      const BoundaryPoint bp = boundary_point(body.mesh, c.point);
+      double x[2] = {0.0, 0.0};
+      int dx[3], dy[3];
+      for (int a = 0; a < bp.n; ++a) {
+        const int n = bp.nodes[a];
+        dx[a] = static_cast<int>(body.dof_offset) + 2 * n, dy[a] = dx[a] + 1;
+        x[0] += bp.coeff[a] * (body.center[0] + body.mesh.X[2 * n] + z[dx[a]]);
+        x[1] += bp.coeff[a] * (body.center[1] + body.mesh.X[2 * n + 1] + z[dy[a]]);
+      }
+      const ContactKinematics k = WallBox::point_gap(c.wall, x, w, bp.n, dx, dy, bp.coeff, static_cast<int>(wall_dof));
+      lc->k.ndof = k.ndof;
+      lc->k.gap = k.gap;
+      for (int a = 0; a < k.ndof; ++a) lc->dofs[a] = k.dofs[a], lc->k.dgap[a] = k.dgap[a];
+      lc->slave_xy = -1;
+      return;
+    }
+    case ContactType::RigidWall: {
+      const RigidBody &body = rigid_[c.body];
+      const bool horizontal = c.wall == kLeft || c.wall == kRight;
+      const double sign = (c.wall == kLeft || c.wall == kBottom) ? 1.0 : -1.0;
+      const PetscInt d = body.dof_offset + (horizontal ? 0 : 1);
+      const double x = body.center[horizontal ? 0 : 1] + z[d];
+      lc->k.ndof = 2;
+      lc->k.gap = sign * (x - w[c.wall]) - body.radius;
+      lc->dofs[0] = d, lc->k.dgap[0] = sign;
+      lc->dofs[1] = wall_dof, lc->k.dgap[1] = -sign;
+      lc->slave_xy = -1;
+      return;
+    }
+    case ContactType::RigidRigid:
+      add_rigid(rigid_[c.master]);
+      add_rigid(rigid_[c.body]);
+      lc->k = rigid_rigid(q, q0, rigid_[c.master].radius, rigid_[c.body].radius);
+      lc->slave_xy = 3;
+      break;
+    case ContactType::RigidNode:
+      add_rigid(rigid_[c.master]);
+      add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
+      lc->k = rigid_node(q, q0, rigid_[c.master].radius);
+      lc->slave_xy = 3;
+      break;
+    case ContactType::NodeSegment: {
+      const DiskMesh &m = bodies_[c.master].mesh;
+      const int nb = static_cast<int>(m.boundary.size());
+      add_node(bodies_[c.master], m.boundary[c.segment]);
+      add_node(bodies_[c.master], m.boundary[(c.segment + 1) % nb]);
+      add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
+      lc->k = segment_node(q, q0);
+      lc->slave_xy = 4;
+      break;
+    }
+  }
+  lc->curved = true;
+}
+
+// ---------------------------------------------------------------------------
 // One walk over elements, walls and contacts serves the residual, the
-// Jacobian's sparsity pattern and its values, so the three can never disagree.
+// Jacobian's sparsity pattern and its values, so the three can never
+// disagree: every entry is emitted whatever the state (zeros included).
 PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vector<PetscInt> *ci,
                                            std::vector<PetscInt> *cj, std::vector<PetscScalar> *cv,
                                            bool *inverted, std::vector<char> *active) {
   const bool pattern = ci != nullptr;
   const bool values = cv != nullptr;
   const bool need_K = pattern || values;
-  const PetscInt wall_off = n_body_dofs_, rot_off = n_body_dofs_ + 4, lam_off = MultiplierOffset();
+  const PetscInt wall_off = WallOffset(), rot_off = GaugeOffset(), lam_off = MultiplierOffset();
   auto entry = [&](PetscInt i, PetscInt j, double v) {
+    if (i < 0 || j < 0) return;
     if (pattern) ci->push_back(i), cj->push_back(j);
     if (values) cv->push_back(v);
   };
   PetscFunctionBeginUser;
   if (inverted) *inverted = false;
+  if (active) active->assign(candidates_.size(), kOpen);
   if (!OwnsEverything()) PetscFunctionReturn(0);
+  // The pattern walk has no state: it uses the reference configuration.
+  std::vector<double> zero;
+  if (pattern) zero.assign(n_total_, 0.0), z = zero.data();
 
-  // Bodies: hyperelastic elements.
+  // Deformable bodies: hyperelastic elements.
   std::vector<double> Xe, xe, fe, Ke;
   std::vector<PetscInt> dofs;
   for (const DeformableBody &body : bodies_) {
@@ -255,7 +396,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
         for (int i = 0; i < 2; ++i) {
           dofs[2 * a + i] = body.dof_offset + 2 * n + i;
           Xe[2 * a + i] = m.X[2 * n + i];
-          xe[2 * a + i] = pattern ? 0.0 : m.X[2 * n + i] + z[dofs[2 * a + i]];
+          xe[2 * a + i] = m.X[2 * n + i] + z[dofs[2 * a + i]];
         }
       }
       if (pattern) {
@@ -278,9 +419,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
     }
   }
 
-  // Walls: the pressure load P * box area. (The pattern walk has no state: it uses zeros.)
-  std::vector<double> zero;
-  if (pattern) zero.assign(n_total_, 0.0), z = zero.data();
+  // Walls: the pressure load P * box area.
   const double *w = z + wall_off;
   if (F) {
     double g[4];
@@ -294,16 +433,18 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
       for (int j = 0; j < 4; ++j) entry(wall_off + i, wall_off + j, H[4 * i + j]);
   }
 
-  // Proximal term on the Newton step: rho on the diagonal of every body and wall unknown.
+  // Proximal term on the Newton step: rho on the diagonal of every body and
+  // wall unknown (rho r^2 on rigid rotations, which are angles).
   if (need_K) {
-    const double rho = params_.prox_eta * params_.young;
-    for (PetscInt i = 0; i < rot_off; ++i) entry(i, i, rho);
+    const double rho = rho_;
+    std::vector<double> diag(rot_off, rho);
+    if (Frictional())
+      for (const RigidBody &r : rigid_) diag[r.dof_offset + 2] = rho * r.radius * r.radius;
+    for (PetscInt i = 0; i < rot_off; ++i) entry(i, i, diag[i]);
   }
 
   // Rotation gauge of frictionless bodies: c_b(u) = G_b . u = mean of X x u = 0,
   // with multiplier mu_b (a torque): R_u -= mu_b G_b, R_mu = (E / R_b) c_b.
-  // By the mirror symmetry of mesh and box the equilibrium torque is zero, so
-  // the constraint selects the symmetric equilibrium without loading it.
   for (size_t b = 0; b < torque_.size(); ++b) {
     const DeformableBody &body = bodies_[b];
     const int nn = body.mesh.num_nodes();
@@ -323,37 +464,49 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
     if (need_K) entry(mu_dof, mu_dof, 0.0);
   }
 
-  // Contacts: -lambda dg/dz in the equilibrium rows, the NCP function in the multiplier rows.
-  if (active) active->assign(candidates_.size(), 0);
-  const double c_n = params_.ncp_scale * params_.young;
+  // Contacts: -lambda_n dg - lambda_t ds in the equilibrium rows, the NCP
+  // functions in the multiplier rows.
+  const double c_n = params_.ncp_scale * params_.young, c_t = c_n, mu_f = params_.friction;
+  // Dual proximal term: -delta on the multiplier diagonal of the Newton matrix.
+  // Redundant constraints (hyperstatic rigid contacts, a square lattice) leave
+  // the multipliers indeterminate and the KKT matrix singular; the term keeps
+  // the indeterminate part at its current value and, like rho, never enters
+  // the residual.
+  const double dual_reg = params_.prox_eta;
+  LocalContact lc;
   for (size_t c = 0; c < candidates_.size(); ++c) {
-    const ContactCandidate &cc = candidates_[c];
-    const DeformableBody &body = bodies_[cc.body];
-    const BoundaryPoint bp = boundary_point(body.mesh, cc.point);
-    double x[2] = {0.0, 0.0};
-    int dx[3], dy[3];
-    for (int a = 0; a < bp.n; ++a) {
-      const int n = bp.nodes[a];
-      dx[a] = static_cast<int>(body.dof_offset) + 2 * n, dy[a] = dx[a] + 1;
-      x[0] += bp.coeff[a] * (body.center[0] + body.mesh.X[2 * n] + z[dx[a]]);
-      x[1] += bp.coeff[a] * (body.center[1] + body.mesh.X[2 * n + 1] + z[dy[a]]);
-    }
-    const ContactKinematics k =
-        WallBox::point_gap(cc.wall, x, w, bp.n, dx, dy, bp.coeff, static_cast<int>(wall_off) + cc.wall);
-    const PetscInt lam_dof = lam_off + static_cast<PetscInt>(c);
-    const double lam = z[lam_dof];
-    const NormalNcp ncp = normal_ncp(params_.ncp, lam, k.gap, c_n);
-    if (active) (*active)[c] = ncp.active;
+    ContactGeometry(candidates_[c], z, &lc);
+    const PairKinematics &k = lc.k;
+    const int nd = k.ndof;
+    const PetscInt ln_dof = lam_off + static_cast<PetscInt>(c), lt_dof = tangential_index_[c];
+    const double lam_n = z[ln_dof], lam_t = lt_dof >= 0 ? z[lt_dof] : 0.0;
+    const NormalNcp ncp = normal_ncp(params_.ncp, lam_n, k.gap, c_n);
+    TangentialNcp tan;
+    if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t);
+    if (active) (*active)[c] = lt_dof >= 0 ? tan.state : (ncp.active ? kClosed : kOpen);
     if (F) {
-      for (int a = 0; a < k.ndof; ++a) F[k.dofs[a]] -= lam * k.dgap[a];
-      F[lam_dof] += ncp.value;
+      for (int a = 0; a < nd; ++a)
+        if (lc.dofs[a] >= 0) F[lc.dofs[a]] -= lam_n * k.dgap[a] + lam_t * k.dslip[a];
+      F[ln_dof] += ncp.value;
+      if (lt_dof >= 0) F[lt_dof] += tan.value;
     }
-    if (need_K) {
-      for (int a = 0; a < k.ndof; ++a) {
-        entry(k.dofs[a], lam_dof, -k.dgap[a]);
-        entry(lam_dof, k.dofs[a], ncp.d_gap * k.dgap[a]);
+    if (!need_K) continue;
+    if (lc.curved)
+      for (int a = 0; a < nd; ++a)
+        for (int b = 0; b < nd; ++b)
+          entry(lc.dofs[a], lc.dofs[b], -(lam_n * k.d2gap[a * nd + b] + lam_t * k.d2slip[a * nd + b]));
+    for (int a = 0; a < nd; ++a) {
+      entry(lc.dofs[a], ln_dof, -k.dgap[a]);
+      entry(ln_dof, lc.dofs[a], ncp.d_gap * k.dgap[a]);
+    }
+    entry(ln_dof, ln_dof, ncp.d_lambda - dual_reg);
+    if (lt_dof >= 0) {
+      for (int a = 0; a < nd; ++a) {
+        entry(lc.dofs[a], lt_dof, -k.dslip[a]);
+        entry(lt_dof, lc.dofs[a], tan.d_gap * k.dgap[a] + tan.d_slip * k.dslip[a]);
       }
-      entry(lam_dof, lam_dof, ncp.d_lambda);
+      entry(lt_dof, lt_dof, tan.d_lambda_t - dual_reg);
+      entry(lt_dof, ln_dof, tan.d_lambda_n);
     }
   }
   PetscFunctionReturn(0);
@@ -389,11 +542,21 @@ PetscErrorCode FormFunction(SNES snes, Vec z, Vec F, void *ctx) {
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode FormJacobian(SNES, Vec z, Mat J, Mat, void *ctx) {
+PetscErrorCode FormJacobian(SNES snes, Vec z, Mat J, Mat, void *ctx) {
   auto *p = static_cast<CompactionProblem *>(ctx);
   const PetscScalar *za;
   PetscFunctionBeginUser;
   PetscCall(PetscLogEventBegin(event_jacobian, 0, 0, 0, 0));
+  // Proximal weight, switched evolution relaxation: rho = prox_initial * P at
+  // the first iterate, then proportional to the residual (which keeps
+  // Newton's quadratic rate), never below prox_eta * E.
+  const double rho_min = p->params_.prox_eta * p->params_.young;
+  p->rho_ = rho_min;
+  if (snes && p->fnorm0_ > 0.0) {
+    PetscReal fnorm;
+    PetscCall(SNESGetFunctionNorm(snes, &fnorm));
+    p->rho_ = std::max(rho_min, p->params_.prox_initial * p->pressure_ * fnorm / p->fnorm0_);
+  }
   PetscCall(p->Gather(z));
   PetscCall(VecGetArrayRead(p->zall_, &za));
   p->coo_values_.clear();
@@ -404,7 +567,7 @@ PetscErrorCode FormJacobian(SNES, Vec z, Mat J, Mat, void *ctx) {
   PetscFunctionReturn(0);
 }
 
-// Converged only when the residual is small and the active set is stable.
+// Converged only when the residual is small and the contact states are stable.
 PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal, PetscReal fnorm,
                                SNESConvergedReason *reason, void *ctx) {
   auto *p = static_cast<CompactionProblem *>(ctx);
@@ -430,11 +593,11 @@ PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal, Pet
 
 static PetscErrorCode NewtonMonitor(SNES, PetscInt it, PetscReal fnorm, void *ctx) {
   auto *p = static_cast<CompactionProblem *>(ctx);
-  int active = 0;
+  int closed = 0, sliding = 0;
   PetscFunctionBeginUser;
-  for (char a : p->ActiveSet()) active += a;
-  PetscCall(PetscPrintf(PETSC_COMM_WORLD, "    newton %2" PetscInt_FMT "  |R| %.3e  active contacts %d\n", it,
-                        (double)fnorm, active));
+  for (char a : p->ActiveSet()) closed += a == kClosed, sliding += a == kSliding;
+  PetscCall(PetscPrintf(PETSC_COMM_WORLD, "    newton %2" PetscInt_FMT "  |R| %.3e  closed contacts %d  sliding %d\n", it,
+                        (double)fnorm, closed, sliding));
   PetscFunctionReturn(0);
 }
 
@@ -470,7 +633,13 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscFunctionBeginUser;
   PetscCall(DestroySolver());
   lambda_.resize(candidates_.size(), 0.0);
-  n_total_ = MultiplierOffset() + static_cast<PetscInt>(candidates_.size());
+  lambda_t_.resize(candidates_.size(), 0.0);
+  tangential_index_.assign(candidates_.size(), -1);
+  PetscInt next = TangentialOffset();
+  for (size_t c = 0; c < candidates_.size(); ++c)
+    if (HasTangential(candidates_[c])) tangential_index_[c] = next++;
+  if (u_start_.size() != u_.size()) u_start_ = u_;
+  n_total_ = next;
   const PetscInt n_local = rank_ == 0 ? n_total_ : 0;
   PetscCall(VecCreateMPI(comm_, n_local, n_total_, &z_));
   PetscCall(VecDuplicate(z_, &r_));
@@ -517,8 +686,9 @@ PetscErrorCode CompactionProblem::EvaluateResidual(Vec z, Vec F) {
 
 PetscErrorCode CompactionProblem::EvaluateJacobian(Vec z, Mat *J) {
   PetscFunctionBeginUser;
-  PetscCall(MatDuplicate(J_, MAT_DO_NOT_COPY_VALUES, J));
-  PetscCall(FormJacobian(nullptr, z, *J, *J, this));
+  // PETSc 3.18's MatDuplicate does not carry the COO map: fill J_, then copy it.
+  PetscCall(FormJacobian(nullptr, z, J_, J_, this));
+  PetscCall(MatDuplicate(J_, MAT_COPY_VALUES, J));
   PetscFunctionReturn(0);
 }
 
@@ -528,6 +698,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   *report = SolveReport();
   const State saved = SaveState();
   const double saved_pressure = pressure_;
+  u_start_ = u_;
   // Secant predictor along the load path: extrapolate the bodies and walls
   // from the last two converged states (none for the first increment).
   if (params_.secant_predictor && have_previous_ && pressure_ != previous_pressure_) {
@@ -537,6 +708,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   }
   pressure_ = pressure;
   PetscCall(RefreshCandidates());
+  const double pen_tol = 1e-9 * mean_diameter_;
   for (int refresh = 0;; ++refresh) {
     if (!snes_) PetscCall(SetUpLayout());
     PetscCall(PackState(z_));
@@ -550,6 +722,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     if (report->reason <= 0) {
       RestoreState(saved);
       pressure_ = saved_pressure;
+      u_start_ = u_;
       PetscFunctionReturn(0);
     }
     PetscCall(Gather(z_));
@@ -557,26 +730,25 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     PetscCall(VecGetArrayRead(zall_, &za));
     Unpack(za);
     PetscCall(VecRestoreArrayRead(zall_, &za));
-    // A node that was not a candidate may have crossed a wall during the
-    // solve: make it a candidate and solve again (rare, the margin is wide).
-    const size_t before = candidates_.size();
-    bool penetrated = false;
-    for (const ContactCandidate &c : DetectCandidates(0.0)) {
-      double x[2];
-      BoundaryPointPosition(c.body, c.point, x);
-      double g[4];
-      WallBox::point_gaps(x, w_, g);
-      if (g[c.wall] < 0.0) penetrated = true;
+    // A point that was not a candidate may have crossed another body or a
+    // wall during the solve, or a node may have slid onto the next segment:
+    // update the candidates and solve again.
+    std::map<std::tuple<int, int, int, int, int>, int> current;
+    for (const ContactCandidate &c : candidates_) current[CandidateKey(c)] = c.segment;
+    bool stale = false;
+    for (const ContactCandidate &c : DetectCandidates(-pen_tol / mean_diameter_)) {
+      auto it = current.find(CandidateKey(c));
+      if (it == current.end() || it->second != c.segment) stale = true;
     }
-    if (penetrated) PetscCall(RefreshCandidates());
-    if (!penetrated || candidates_.size() == before || refresh >= 3) break;
+    if (!stale || refresh >= 5) break;
+    PetscCall(RefreshCandidates());
     ++report->candidate_refreshes;
   }
   report->converged = true;
+  for (char a : active_now_) report->active_contacts += a != kOpen;
   previous_ = saved;
   previous_pressure_ = saved_pressure;
   have_previous_ = true;
-  for (char a : active_now_) report->active_contacts += a;
   PetscFunctionReturn(0);
 }
 
@@ -600,6 +772,56 @@ std::vector<double> CompactionProblem::CellAreaRatio(int b) const {
   return out;
 }
 
+std::vector<ContactForce> CompactionProblem::ContactForces() const {
+  std::vector<ContactForce> out;
+  std::vector<double> z(MultiplierOffset() + candidates_.size(), 0.0);
+  std::copy(u_.begin(), u_.end(), z.begin());
+  std::copy(w_, w_ + 4, z.begin() + WallOffset());
+  LocalContact lc;
+  for (size_t c = 0; c < candidates_.size(); ++c) {
+    const ContactCandidate &cc = candidates_[c];
+    ContactGeometry(cc, z.data(), &lc);
+    ContactForce f;
+    f.type = cc.type;
+    f.gap = lc.k.gap;
+    f.normal_multiplier = lambda_[c];
+    f.tangential_multiplier = lambda_t_[c];
+    const bool deformable_slave =
+        cc.type == ContactType::PointWall || cc.type == ContactType::RigidNode || cc.type == ContactType::NodeSegment;
+    f.slave_particle = deformable_slave ? bodies_[cc.body].particle : rigid_[cc.body].particle;
+    if (cc.type == ContactType::RigidRigid || cc.type == ContactType::RigidNode)
+      f.master_particle = rigid_[cc.master].particle;
+    else if (cc.type == ContactType::NodeSegment)
+      f.master_particle = bodies_[cc.master].particle;
+    if (lc.slave_xy >= 0) {
+      // Generalized force on the slave's translation: lambda_n dg/dx + lambda_t ds/dx.
+      for (int i = 0; i < 2; ++i)
+        f.force[i] = lambda_[c] * lc.k.dgap[lc.slave_xy + i] + lambda_t_[c] * lc.k.dslip[lc.slave_xy + i];
+      if (cc.type == ContactType::RigidRigid) {
+        double xa[2];
+        RigidPosition(cc.master, xa, nullptr);
+        for (int i = 0; i < 2; ++i) f.point[i] = xa[i] + rigid_[cc.master].radius * lc.k.normal[i];
+      } else {
+        NodePosition(cc.body, bodies_[cc.body].mesh.boundary[cc.point], f.point);
+      }
+    } else {
+      // Wall: the force on the body is lambda_n along the wall's inward normal.
+      const bool horizontal = cc.wall == kLeft || cc.wall == kRight;
+      const double sign = (cc.wall == kLeft || cc.wall == kBottom) ? 1.0 : -1.0;
+      f.force[horizontal ? 0 : 1] = sign * lambda_[c];
+      if (cc.type == ContactType::PointWall) {
+        BoundaryPointPosition(cc.body, cc.point, f.point);
+      } else {
+        RigidPosition(cc.body, f.point, nullptr);
+        f.point[horizontal ? 0 : 1] -= sign * rigid_[cc.body].radius;
+      }
+    }
+    f.state = active_now_.size() == candidates_.size() ? active_now_[c] : (lambda_[c] > 0.0 ? kClosed : kOpen);
+    out.push_back(f);
+  }
+  return out;
+}
+
 StateSummary CompactionProblem::Summary() const {
   StateSummary s;
   s.box_width = WallBox::width(w_);
@@ -607,32 +829,45 @@ StateSummary CompactionProblem::Summary() const {
   s.min_cell_area_ratio = std::numeric_limits<double>::infinity();
   for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) {
     const std::vector<double> ratio = CellAreaRatio(b);
+    double area = 0.0;
     for (size_t e = 0; e < ratio.size(); ++e) {
-      s.particle_area += ratio[e] * bodies_[b].ref_cell_area[e];
+      area += ratio[e] * bodies_[b].ref_cell_area[e];
       s.min_cell_area_ratio = std::min(s.min_cell_area_ratio, ratio[e]);
     }
-    s.ref_particle_area += bodies_[b].ref_area;
+    s.deformable_area += area;
+    s.ref_deformable_area += bodies_[b].ref_area;
   }
+  if (bodies_.empty()) s.min_cell_area_ratio = 1.0;
+  double rigid_area = 0.0;
+  for (const RigidBody &r : rigid_) rigid_area += M_PI * r.radius * r.radius;
+  s.particle_area = s.deformable_area + rigid_area;
+  s.ref_particle_area = s.ref_deformable_area + rigid_area;
   s.packing_fraction = s.particle_area / WallBox::area(w_);
   s.area_ratio = s.particle_area / s.ref_particle_area;
+  // Penetration: every boundary point against the walls, and every candidate pair.
   s.max_penetration = -std::numeric_limits<double>::infinity();
   for (int b = 0; b < static_cast<int>(bodies_.size()); ++b)
     for (int i = 0; i < static_cast<int>(bodies_[b].mesh.boundary.size()); ++i) {
-      double x[2];
+      double x[2], g[4];
       BoundaryPointPosition(b, i, x);
-      double g[4];
       WallBox::point_gaps(x, w_, g);
       for (double gi : g) s.max_penetration = std::max(s.max_penetration, -gi);
     }
-  for (size_t c = 0; c < candidates_.size(); ++c) {
-    double x[2];
-    BoundaryPointPosition(candidates_[c].body, candidates_[c].point, x);
-    double g[4];
-      WallBox::point_gaps(x, w_, g);
-    s.wall_force[candidates_[c].wall] += lambda_[c];
-    s.min_multiplier = std::min(s.min_multiplier, lambda_[c]);
-    s.max_complementarity = std::max(s.max_complementarity, std::abs(lambda_[c] * g[candidates_[c].wall]));
-    if (lambda_[c] > 0.0) ++s.active_contacts;
+  for (int r = 0; r < static_cast<int>(rigid_.size()); ++r) {
+    double x[2], g[4];
+    RigidPosition(r, x, nullptr);
+    WallBox::point_gaps(x, w_, g);
+    for (double gi : g) s.max_penetration = std::max(s.max_penetration, rigid_[r].radius - gi);
+  }
+  const std::vector<ContactForce> forces = ContactForces();
+  for (size_t c = 0; c < forces.size(); ++c) {
+    const ContactForce &f = forces[c];
+    s.max_penetration = std::max(s.max_penetration, -f.gap);
+    if (f.master_particle < 0) s.wall_force[candidates_[c].wall] += f.normal_multiplier;
+    s.min_multiplier = std::min(s.min_multiplier, f.normal_multiplier);
+    s.max_complementarity = std::max(s.max_complementarity, std::abs(f.normal_multiplier * f.gap));
+    if (f.normal_multiplier > 0.0) ++s.active_contacts;
+    if (f.state == kSliding) ++s.sliding_contacts;
   }
   for (double mu : torque_) s.max_gauge_torque = std::max(s.max_gauge_torque, std::abs(mu));
   return s;

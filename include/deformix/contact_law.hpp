@@ -18,6 +18,19 @@
 // stiffness when the gap is curved. No penalty: a converged solution has
 // g >= 0 and lambda >= 0 exactly up to the Newton tolerance.
 //
+// Coulomb friction (2D, incremental). With s the tangential slip over the
+// load step and lambda_t the tangential force on the slave along t, the
+// Alart-Curnier projection
+//     C_t = lambda_t - proj_[-mu a, mu a](lambda_t - c_t s),
+//     a   = max(0, lambda_n - c_n g)   (the augmented normal force)
+// is zero exactly when |lambda_t| <= mu lambda_n with s = 0 (stick) or
+// lambda_t = -mu lambda_n sign(s) (slip), and lambda_t = 0 when the contact is
+// open. Generalized Jacobian by cases:
+//     open  (a = 0):                  dC_t = d lambda_t
+//     stick (|lambda_t - c_t s| <= mu a): dC_t = c_t ds
+//     slip  (sigma = sign(lambda_t - c_t s)):
+//                                     dC_t = d lambda_t - sigma mu (d lambda_n - c_n dg)
+//
 // References: Alart & Curnier, CMAME 92 (1991); Fischer, Optimization 24
 // (1992); Hueber & Wohlmuth, CMAME 194 (2005) (primal-dual active set =
 // semismooth Newton).
@@ -37,6 +50,18 @@ struct NormalNcp {
 };
 
 NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n);
+
+enum ContactState { kOpen = 0, kClosed = 1, kSliding = 2 };
+
+// Value and generalized derivatives of the Coulomb NCP function.
+struct TangentialNcp {
+  double value = 0.0;
+  double d_lambda_t = 0.0, d_lambda_n = 0.0, d_gap = 0.0, d_slip = 0.0;
+  ContactState state = kOpen;
+};
+
+TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double slip, double mu, double c_n,
+                          double c_t);
 
 // Kinematics of one contact: the gap and its first derivatives with respect
 // to the global unknowns it depends on (at most kMaxDofs of them). A

@@ -19,6 +19,12 @@ PetscErrorCode GetOutputDirectory(MPI_Comm comm, const std::string &fallback, st
 // in it, without touching any existing file. Collective; errors on every rank.
 PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir);
 
+// Refuses options that nothing in deformix or PETSc's solver stack will read
+// (a misspelt -nuu must not silently run the default nu). Call it after
+// every component has read its options; solver options (-snes_*, -ksp_*,
+// -pc_*, -mat_*, ...) are read later and pass by their prefix.
+PetscErrorCode CheckUnknownOptions(MPI_Comm comm);
+
 // True when -help was given: drivers print their options and stop before running.
 bool HelpRequested();
 

@@ -8,6 +8,7 @@
 //     /body_K/coordinates  current node coordinates (n_nodes x 2)
 //     /body_K/cells        connectivity (n_cells x nodes per cell)
 //     /body_K/cell_area_ratio   current / reference area per cell (J)
+//     /rigid               rigid disks (n_rigid x 4): x, y, radius, rotation
 // Only rank 0 writes (the state is replicated).
 #pragma once
 #include <petscsys.h>
@@ -34,6 +35,9 @@ class CsvWriter {
   size_t ncols_ = 0;
   MPI_Comm comm_ = MPI_COMM_NULL;
 };
+
+// Removes a file if it exists (rank 0).
+PetscErrorCode RemoveFile(MPI_Comm comm, const std::string &path);
 
 // Appends level `level` to the HDF5 file `path` (created at level 0).
 PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level, double P_over_E,

@@ -1,34 +1,52 @@
 // The global quasistatic problem: one PETSc SNES for everything.
 //
-// Unknowns z = (u, w, lambda): the nodal displacements u of every deformable
-// disk, the four wall positions w, and one normal multiplier lambda_c per
-// contact candidate. At imposed pressure P the equations are
-//     R_u = f_int(u) - sum_c lambda_c dg_c/du             = 0   (body equilibrium)
-//     R_w = dPi_P/dw - sum_c lambda_c dg_c/dw              = 0   (wall equilibrium)
-//     R_c = C(lambda_c, g_c(u, w))                        = 0   (Signorini, NCP)
-// i.e. the KKT conditions of  min  sum W(u) + P * box_area(w)  s.t.  g >= 0.
-// The system is solved by semismooth Newton (SNESNEWTONLS, generalized
-// Jacobian of the NCP function, MUMPS LU by default).
+// Unknowns z = (u, w, mu, lambda_n, lambda_t):
+//   u         body unknowns, contiguous per particle in particle order:
+//             nodal displacements of each deformable disk, and the centre
+//             displacement (plus the rotation when friction is on) of each
+//             rigid disk;
+//   w         the four wall positions;
+//   mu        rotation gauges of frictionless deformable disks (optional);
+//   lambda_n  one normal multiplier per contact candidate;
+//   lambda_t  one tangential multiplier per frictional candidate.
+// At imposed pressure P the equations are
+//   R_u  = f_int(u) - sum_c (lambda_n,c dg_c/du + lambda_t,c ds_c/du)   = 0
+//   R_w  = dPi_P/dw - sum_c lambda_n,c dg_c/dw                          = 0
+//   R_n  = C_n(lambda_n, g)                  (Signorini, contact_law.hpp)
+//   R_t  = C_t(lambda_t, lambda_n, g, s)     (Coulomb, contact_law.hpp)
+// i.e. the KKT conditions of min sum W(u) + P * box_area(w) under g >= 0
+// with incremental Coulomb friction on the slip s over the load step. The
+// system is solved by semismooth Newton (SNESNEWTONLS with the generalized
+// Jacobian of the NCP functions, MUMPS LU by default).
 //
-// Singular modes. A frictionless disk may rotate freely, and the whole
-// assembly (walls + bodies) may translate: the tangent is singular along
-// these modes (later also for rattlers and floating particles). The
-// rotation of a frictionless deformable disk is a pure gauge of the
-// continuum problem, but the discrete disk has orientation-dependent
-// energy and Newton wanders along this nearly flat mode from roundoff,
-// landing on different orientations (and packing fractions differing by
-// ~0.2 % at 96 triangles) from run to run. By default (-constrain_rotation)
-// the mean rotation of each such body is fixed by a Lagrange multiplier
-// (a torque) that is zero at the symmetric equilibrium, and is reported. The
-// Jacobian used for the Newton step is J + rho D, where D is the identity on
-// the body and wall unknowns: this is a proximal term rho/2 |z - z_k|^2
-// anchored at the current iterate z_k, so it changes the path but not the
-// residual, and it vanishes at equilibrium (the converged z satisfies R = 0
-// exactly). rho = prox_eta * E is tiny compared with the elastic stiffness, so
-// Newton keeps its quadratic rate on every non-singular mode.
+// Contact pairs (pair_kinematics.hpp, wall_box.hpp): a boundary point of a
+// deformable disk against a wall, a rigid disk against a wall, rigid-rigid,
+// rigid disk against a boundary node of a deformable disk, and a boundary
+// node of one deformable disk against a boundary segment of another. Walls
+// are frictionless.
 //
-// Newton stops only when |R| is below tolerance AND the set of active
-// contacts did not change in the last iteration (deal.II step-42's rule).
+// Singular modes. Rattlers, the free rotation of frictionless disks and the
+// translation of the whole assembly (walls + bodies) make the tangent
+// singular. The Jacobian used for the Newton step is J + rho D, D the
+// identity on body and wall unknowns (r^2 on rigid rotations): a proximal
+// term rho/2 |z - z_k|^2 anchored at the current iterate z_k. It changes the
+// Newton path but not the residual, so it vanishes at equilibrium (the
+// converged z satisfies R = 0 exactly), and rho = prox_eta * E is tiny
+// compared with the elastic stiffness, so Newton keeps its quadratic rate on
+// every non-singular mode. Its dual counterpart, -prox_eta on the multiplier
+// diagonal, makes hyperstatic contact networks (redundant constraints,
+// indeterminate forces) solvable the same way.
+// The rotation of a frictionless deformable disk is a pure gauge of the
+// continuum problem, but the discrete disk has orientation-dependent energy
+// and Newton wanders along this nearly flat mode from roundoff, landing on
+// different orientations (and packing fractions differing by ~0.2 % at 96
+// triangles) from run to run. With -constrain_rotation the mean rotation of
+// each such body is fixed by a Lagrange multiplier (a torque) that is zero
+// at the symmetric equilibrium of the single-particle test, and is reported.
+//
+// Newton stops only when |R| is below tolerance AND the set of open /
+// sticking / sliding contacts did not change in the last iteration
+// (deal.II step-42's rule).
 //
 // Parallel layout: every rank keeps a replicated copy of the state for
 // geometry (contact detection, observables); each rank assembles the
@@ -43,6 +61,7 @@
 #include "deformix/contact_law.hpp"
 #include "deformix/disk_mesh.hpp"
 #include "deformix/hyperelastic_element.hpp"
+#include "deformix/pair_kinematics.hpp"
 #include "deformix/wall_box.hpp"
 
 namespace deformix {
@@ -50,12 +69,14 @@ namespace deformix {
 struct ProblemParameters {
   double young = 1.0;            // E
   double poisson = 0.495;        // nu
+  double friction = 0.0;         // Coulomb coefficient between particles (walls are frictionless)
   NcpFunction ncp = NcpFunction::Min;
-  double ncp_scale = 1.0;        // c_n = ncp_scale * E
-  double prox_eta = 1e-8;        // rho = prox_eta * E
+  double ncp_scale = 1.0;        // c_n = c_t = ncp_scale * E
+  double prox_eta = 1e-8;        // smallest rho / E
+  double prox_initial = 0.0;     // rho at the first Newton iterate / P (0: rho = prox_eta * E throughout)
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
-  PetscBool constrain_rotation = PETSC_TRUE;
-  PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path  // rotation gauge for frictionless deformable bodies
+  PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
+  PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
 
@@ -65,6 +86,14 @@ struct DeformableBody {
   PetscInt dof_offset = 0;        // first global unknown of this body
   std::vector<double> ref_cell_area;
   double ref_area = 0.0;
+  int particle = 0;               // index in the particle list
+};
+
+struct RigidBody {
+  double center[2] = {0.0, 0.0};  // reference position of the centre
+  double radius = 0.5;
+  PetscInt dof_offset = 0;        // (u_x, u_y[, theta])
+  int particle = 0;
 };
 
 // A contact point on the boundary of a deformable body, as a fixed linear
@@ -82,10 +111,32 @@ struct BoundaryPoint {
 };
 BoundaryPoint boundary_point(const DiskMesh &mesh, int boundary_index);
 
+enum class ContactType : int {
+  PointWall = 0,    // deformable boundary point (BoundaryPoint) - wall
+  RigidWall = 1,    // rigid disk - wall
+  RigidRigid = 2,   // rigid `master` - rigid `body`
+  RigidNode = 3,    // rigid `master` - boundary node `point` of deformable `body`
+  NodeSegment = 4,  // boundary segment `segment` of deformable `master` - node `point` of deformable `body`
+};
+
 struct ContactCandidate {
-  int body = 0;
-  int point = 0;  // index into the body's mesh.boundary
-  Wall wall = kLeft;
+  ContactType type = ContactType::PointWall;
+  int body = 0;      // the slave body: deformable (PointWall, RigidNode, NodeSegment) or rigid
+  int point = 0;     // index into the slave's mesh.boundary (deformable slaves)
+  Wall wall = kLeft; // wall pairs
+  int master = -1;   // rigid body (RigidRigid, RigidNode) or deformable body (NodeSegment)
+  int segment = -1;  // NodeSegment: master boundary nodes boundary[segment] -> boundary[segment + 1]
+};
+
+// Force of one contact at the current state, for observables.
+struct ContactForce {
+  ContactType type;
+  int slave_particle = -1, master_particle = -1;  // master -1: a wall
+  double force[2] = {0, 0};   // force on the slave (translational part)
+  double point[2] = {0, 0};   // contact point
+  double normal_multiplier = 0, tangential_multiplier = 0;
+  double gap = 0;
+  int state = 0;              // 0 open, 1 closed (stick / frictionless), 2 sliding
 };
 
 // Outcome of one nonlinear solve at fixed pressure.
@@ -95,22 +146,24 @@ struct SolveReport {
   SNESConvergedReason reason = SNES_CONVERGED_ITERATING;
   double residual = 0.0;
   int active_contacts = 0;
-  int candidate_refreshes = 0;  // times the candidate set grew because a non-candidate penetrated
+  int candidate_refreshes = 0;  // re-solves because a non-candidate penetrated or a node changed segment
 };
 
 // Observables of the current state.
 struct StateSummary {
   double box_width = 0.0, box_height = 0.0;
   double particle_area = 0.0, ref_particle_area = 0.0;
+  double deformable_area = 0.0, ref_deformable_area = 0.0;
   double packing_fraction = 0.0;
   double area_ratio = 0.0;                 // current / initial particle area
   double min_cell_area_ratio = 0.0;        // smallest element area change (inversion watch)
-  double max_penetration = 0.0;            // max over boundary nodes and walls of -g (<= 0 means none)
-  double wall_force[4] = {0, 0, 0, 0};     // sum of multipliers on each wall
-  double min_multiplier = 0.0;             // most negative multiplier (>= -tol)
-  double max_complementarity = 0.0;        // max |lambda g| over candidates
+  double max_penetration = 0.0;            // max over boundary points and walls, and over candidates, of -g
+  double wall_force[4] = {0, 0, 0, 0};     // sum of normal multipliers on each wall
+  double min_multiplier = 0.0;             // most negative normal multiplier (>= -tol)
+  double max_complementarity = 0.0;        // max |lambda_n g| over candidates
   double max_gauge_torque = 0.0;           // max |mu_b| of the rotation gauges (0 at a true equilibrium)
-  int active_contacts = 0;
+  int active_contacts = 0;                 // candidates with lambda_n > 0
+  int sliding_contacts = 0;
 };
 
 class CompactionProblem {
@@ -120,9 +173,12 @@ class CompactionProblem {
   CompactionProblem(const CompactionProblem &) = delete;
   CompactionProblem &operator=(const CompactionProblem &) = delete;
 
+  // Parameters first, then bodies (the friction decides the rigid unknowns).
   PetscErrorCode SetParameters(const ProblemParameters &p);
   // Adds a deformable disk whose mesh origin sits at (cx, cy); returns its index.
   int AddDeformableBody(const DiskMesh &mesh, double cx, double cy);
+  // Adds a rigid disk; returns its index.
+  int AddRigidBody(double cx, double cy, double radius);
   // Places the walls (x_left, x_right, y_bottom, y_top).
   void SetWalls(const double w[4]);
 
@@ -134,7 +190,8 @@ class CompactionProblem {
   struct State {
     std::vector<double> u;
     double w[4];
-    std::vector<double> lambda;  // aligned with candidates
+    std::vector<double> lambda;    // normal multipliers, aligned with candidates
+    std::vector<double> lambda_t;  // tangential multipliers, aligned with candidates (0 when frictionless)
     std::vector<double> torque;
     std::vector<ContactCandidate> candidates;
   };
@@ -142,16 +199,24 @@ class CompactionProblem {
   void RestoreState(const State &s);
 
   StateSummary Summary() const;
+  std::vector<ContactForce> ContactForces() const;
   const std::vector<DeformableBody> &Bodies() const { return bodies_; }
+  const std::vector<RigidBody> &RigidBodies() const { return rigid_; }
+  int NumParticles() const { return static_cast<int>(bodies_.size() + rigid_.size()); }
   const std::vector<double> &Displacements() const { return u_; }
   const double *Walls() const { return w_; }
   const ProblemParameters &Parameters() const { return params_; }
   const NeoHookean &Material() const { return material_; }
   double Pressure() const { return pressure_; }
+  bool Frictional() const { return params_.friction > 0.0; }
   // Current coordinates of node a of body b.
   void NodePosition(int b, int a, double x[2]) const;
   // Current coordinates of boundary point i of body b (see BoundaryPoint).
   void BoundaryPointPosition(int b, int i, double x[2]) const;
+  // Current centre (and rotation, 0 without friction) of rigid body r.
+  void RigidPosition(int r, double x[2], double *theta) const;
+  // Current centroid (mean node position) of deformable body b.
+  void BodyCentroid(int b, double x[2]) const;
   // Per-cell current/reference area ratio of body b (volumetric strain J - 1 on average).
   std::vector<double> CellAreaRatio(int b) const;
 
@@ -161,10 +226,13 @@ class CompactionProblem {
   PetscErrorCode EvaluateResidual(Vec z, Vec F);
   PetscErrorCode EvaluateJacobian(Vec z, Mat *J);  // J is created and owned by the caller
   void SetPressure(double P) { pressure_ = P; }
+  // Makes the current state the start of the load step (reference of the incremental slip).
+  void MarkStepStart() { u_start_ = u_; }
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
   const std::vector<ContactCandidate> &Candidates() const { return candidates_; }
   const std::vector<double> &Multipliers() const { return lambda_; }
-  // Active flags of the candidates at the last residual evaluation.
+  const std::vector<double> &TangentialMultipliers() const { return lambda_t_; }
+  // Contact states (0 open, 1 closed/stick, 2 sliding) at the last residual evaluation.
   const std::vector<char> &ActiveSet() const { return active_now_; }
 
  private:
@@ -172,7 +240,15 @@ class CompactionProblem {
   friend PetscErrorCode FormJacobian(SNES, Vec, Mat, Mat, void *);
   friend PetscErrorCode ConvergenceTest(SNES, PetscInt, PetscReal, PetscReal, PetscReal, SNESConvergedReason *, void *);
 
-  struct Assembly;  // shared residual / Jacobian pattern / Jacobian values walk
+  // Kinematics of one candidate at state z, on at most kMaxDofs global unknowns (-1: absent).
+  struct LocalContact {
+    PairKinematics k;
+    PetscInt dofs[PairKinematics::kMaxDofs];
+    bool frictional = false;
+    bool curved = false;   // the gap / slip have second derivatives
+    int slave_xy = 0;      // local index of the slave's x unknown (force on the slave)
+  };
+  void ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc) const;
   PetscErrorCode SetUpLayout();      // sizes, Vec/Mat/SNES for the current candidate set
   PetscErrorCode DestroySolver();
   PetscErrorCode Gather(Vec z);      // z -> replicated zall_ array
@@ -182,24 +258,35 @@ class CompactionProblem {
   void Pack(double *z) const;
   std::vector<ContactCandidate> DetectCandidates(double margin) const;
   bool OwnsEverything() const { return rank_ == 0; }
+  int RigidDofs() const { return Frictional() ? 3 : 2; }
+  PetscInt WallOffset() const { return n_body_dofs_; }
+  PetscInt GaugeOffset() const { return n_body_dofs_ + 4; }
+  PetscInt MultiplierOffset() const { return n_body_dofs_ + 4 + static_cast<PetscInt>(torque_.size()); }
+  PetscInt TangentialOffset() const { return MultiplierOffset() + static_cast<PetscInt>(candidates_.size()); }
+  static bool IsFrictionalType(ContactType t) { return t == ContactType::RigidRigid || t == ContactType::RigidNode || t == ContactType::NodeSegment; }
+  bool HasTangential(const ContactCandidate &c) const { return Frictional() && IsFrictionalType(c.type); }
+  // Full vector of positions of body unknowns at z (reference + displacement).
+  double Coordinate(const double *z, PetscInt dof, double reference) const { return reference + z[dof]; }
 
   MPI_Comm comm_;
   PetscMPIInt rank_ = 0, size_ = 1;
   ProblemParameters params_;
   NeoHookean material_;
   std::vector<DeformableBody> bodies_;
+  std::vector<RigidBody> rigid_;
   PetscInt n_body_dofs_ = 0;
-  PetscInt MultiplierOffset() const { return n_body_dofs_ + 4 + static_cast<PetscInt>(torque_.size()); }
-  std::vector<double> torque_;  // rotation-gauge multipliers, one per constrained body
-  std::vector<double> u_;  // body displacements (replicated)
+  std::vector<double> u_;        // body unknowns (replicated)
+  std::vector<double> u_start_;  // body unknowns at the start of the load step (slip reference)
+  std::vector<double> torque_;   // rotation-gauge multipliers, one per constrained body
   double w_[4] = {0, 0, 0, 0};
   double pressure_ = 0.0;
-  State previous_;                 // last converged state before the current one (predictor)
+  State previous_;               // last converged state before the current one (predictor)
   double previous_pressure_ = 0.0;
   bool have_previous_ = false;
   double mean_diameter_ = 1.0;
   std::vector<ContactCandidate> candidates_;
-  std::vector<double> lambda_;
+  std::vector<double> lambda_, lambda_t_;
+  std::vector<PetscInt> tangential_index_;  // per candidate: its lambda_t unknown, or -1
 
   // Solver objects for the current layout.
   PetscInt n_total_ = -1;
@@ -210,6 +297,7 @@ class CompactionProblem {
   std::vector<char> active_now_, active_checked_;
   bool inverted_ = false;
   double fnorm0_ = 0.0;
+  double rho_ = 0.0;             // proximal weight of the current Newton matrix
   std::vector<PetscScalar> coo_values_;
 };
 

@@ -1,0 +1,193 @@
+static const char help[] =
+    "compact: isotropic compaction of a mixture of rigid and deformable (neo-Hookean) disks\n"
+    "with frictional contact, in a box of four frictionless, pressure-driven walls (the paper's\n"
+    "sections II-IV).\n\n"
+    "Protocol: n_particles rigid disks (diameters in [0.8, 1.2], uniform area fraction per diameter)\n"
+    "are packed to the frictionless jammed state phi_0 (soft-disk FIRE compression to vanishing\n"
+    "overlap); a fraction kappa of the particle area is turned deformable, homogeneously in space;\n"
+    "friction is switched on; then each level of -pressures (P/E) is reached quasistatically with\n"
+    "automatic sub-stepping, each level being exact equilibrium of\n"
+    "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
+    "solved by semismooth Newton in one PETSc SNES (MUMPS LU).\n\n"
+    "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (the state of every\n"
+    "level) and <output_dir>/packing.csv (the initial packing).\n\n"
+    "Examples:\n"
+    "  build/bin/compact -n_particles 100 -kappa 0.5 -friction 0.2 -output_dir out/compact\n"
+    "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8\n\n"
+    "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
+    "each Newton iteration with the numbers of closed and sliding contacts.\n\n";
+
+#include <petscsnes.h>
+
+#include <cmath>
+#include <exception>
+#include <string>
+#include <vector>
+
+#include "deformix/disk_mesh.hpp"
+#include "deformix/load_controller.hpp"
+#include "deformix/observables.hpp"
+#include "deformix/options.hpp"
+#include "deformix/output.hpp"
+#include "deformix/packing.hpp"
+#include "deformix/problem.hpp"
+
+using namespace deformix;
+
+namespace {
+
+struct CompactOptions {
+  PetscInt n_particles = 64;
+  PetscReal kappa = 0.5;  // mixture ratio: deformable area / particle area
+  PetscInt seed = 1;
+  PetscInt mesh_triangles = 92;
+  std::vector<double> pressures;
+  std::string output_dir;
+  PetscBool write_hdf5 = PETSC_TRUE;
+};
+
+PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
+  PetscFunctionBeginUser;
+  PetscOptionsBegin(comm, nullptr, "Mixture compaction", "deformix");
+  PetscCall(PetscOptionsInt("-n_particles", "number of disks N_p", "", o->n_particles, &o->n_particles, nullptr));
+  PetscCall(PetscOptionsReal("-kappa", "mixture ratio: deformable area / total particle area, in [0, 1]", "", o->kappa,
+                             &o->kappa, nullptr));
+  PetscCall(PetscOptionsInt("-seed", "random seed of the packing (the scene reproduces exactly)", "", o->seed, &o->seed,
+                            nullptr));
+  PetscCall(PetscOptionsInt("-mesh_triangles", "approximate number of triangles per deformable disk (>= 24)", "",
+                            o->mesh_triangles, &o->mesh_triangles, nullptr));
+  PetscCall(PetscOptionsBool("-write_hdf5", "write the state of every level to levels.h5", "", o->write_hdf5,
+                             &o->write_hdf5, nullptr));
+  PetscOptionsEnd();
+  PetscCheck(o->n_particles >= 1 && o->n_particles <= 200000, comm, PETSC_ERR_USER_INPUT,
+             "-n_particles %" PetscInt_FMT ": give between 1 and 200000 particles", o->n_particles);
+  PetscCheck(o->kappa >= 0.0 && o->kappa <= 1.0, comm, PETSC_ERR_USER_INPUT,
+             "-kappa %g: the mixture ratio is a fraction of the particle area, in [0, 1]", (double)o->kappa);
+  PetscCheck(o->seed >= 0, comm, PETSC_ERR_USER_INPUT, "-seed %" PetscInt_FMT " must be >= 0", o->seed);
+  PetscCheck(o->mesh_triangles >= 24, comm, PETSC_ERR_USER_INPUT,
+             "-mesh_triangles %" PetscInt_FMT " is too few: a disk needs at least 24 triangles (2 rings)",
+             o->mesh_triangles);
+  const std::vector<double> defaults = {1e-4, 1e-3, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5};
+  PetscCall(GetPressureList(comm, defaults, &o->pressures));
+  PetscCall(GetOutputDirectory(comm, "out/compact", &o->output_dir));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode WritePackingCsv(MPI_Comm comm, const std::string &path, const DiskPacking &p) {
+  CsvWriter csv;
+  PetscFunctionBeginUser;
+  PetscCall(csv.Open(comm, path, {"x", "y", "radius", "deformable"}));
+  for (int i = 0; i < p.size(); ++i) PetscCall(csv.Row({p.x[i], p.y[i], p.radius[i], double(p.deformable[i])}));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode Run(MPI_Comm comm) {
+  CompactOptions opts;
+  ProblemParameters params;
+  LoadControlParameters load;
+  PetscLogStage stage_pack, stage_solve, stage_output;
+  PetscFunctionBeginUser;
+  // 1. Options: everything is validated before anything is written.
+  params.constrain_rotation = PETSC_FALSE;  // deformable disks rotate freely in a packing
+  PetscCall(ProcessOptions(comm, &opts));
+  PetscCall(params.SetFromOptions(comm));
+  PetscCall(load.SetFromOptions(comm));
+  if (HelpRequested()) PetscFunctionReturn(0);
+  PetscCall(CheckUnknownOptions(comm));
+  PetscCall(PrepareOutputDirectory(comm, opts.output_dir));
+  PetscCall(PetscLogStageRegister("Packing", &stage_pack));
+  PetscCall(PetscLogStageRegister("Solve", &stage_solve));
+  PetscCall(PetscLogStageRegister("Output", &stage_output));
+
+  // 2. Scene: jammed frictionless rigid packing, then a fraction kappa made deformable.
+  PetscCall(PetscLogStagePush(stage_pack));
+  DiskPacking packing;
+  DiskMesh unit_mesh;
+  try {
+    packing = make_jammed_packing(static_cast<int>(opts.n_particles), static_cast<unsigned>(opts.seed), PackingOptions());
+    assign_deformable(packing, opts.kappa, static_cast<unsigned>(opts.seed));
+    unit_mesh = make_disk_mesh(1.0, static_cast<int>(opts.mesh_triangles), 2);
+  } catch (const std::exception &e) {
+    SETERRQ(comm, PETSC_ERR_USER_INPUT, "scene set-up: %s", e.what());
+  }
+  PetscCall(PetscLogStagePop());
+  const Coordination z0 = coordination(packing, contact_network(packing, 0.0), 3);
+  CompactionProblem problem(comm);
+  PetscCall(problem.SetParameters(params));
+  int n_deformable = 0;
+  for (int i = 0; i < packing.size(); ++i) {
+    if (packing.deformable[i]) {
+      DiskMesh mesh = unit_mesh;
+      mesh.radius = packing.radius[i];
+      for (double &x : mesh.X) x *= packing.radius[i];
+      problem.AddDeformableBody(mesh, packing.x[i], packing.y[i]);
+      ++n_deformable;
+    } else {
+      problem.AddRigidBody(packing.x[i], packing.y[i], packing.radius[i]);
+    }
+  }
+  problem.SetWalls(packing.walls);
+  PetscCall(WritePackingCsv(comm, opts.output_dir + "/packing.csv", packing));
+  PetscCall(PetscPrintf(comm,
+                        "compact: %d particles (%d deformable, %d triangles each; %d rigid), kappa = %g, friction = %g,"
+                        " E = %g, nu = %g, seed %d\n"
+                        "  jammed rigid packing (frictionless): phi_0 = %.4f, Z_0 (no rattlers) = %.3f, rattlers %.1f %%\n",
+                        packing.size(), n_deformable, unit_mesh.num_cells(), packing.size() - n_deformable,
+                        (double)opts.kappa, params.friction, params.young, params.poisson, (int)opts.seed,
+                        packing_fraction(packing), z0.z_mirror, 100.0 * z0.rattler_fraction));
+
+  // 3. Levels: solve, measure, write.
+  CsvWriter curve;
+  PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv",
+                       {"P_over_E", "phi", "Z", "Z_no_rattlers", "rattlers", "sigma_xx_over_E", "sigma_xy_over_E",
+                        "sigma_yy_over_E", "P_sigma_over_E", "K_over_E", "mean_volumetric_strain", "contacts",
+                        "sliding_contacts", "newton_its", "substeps", "cuts", "seconds", "max_penetration"}));
+  const std::string h5 = opts.output_dir + "/levels.h5";
+  // Results of an earlier run in this directory must not mix with this one.
+  PetscCall(RemoveFile(comm, h5));
+  PetscCall(PetscPrintf(comm, "  %9s %8s %6s %6s %10s %8s %7s %6s %6s %8s\n", "P/E", "phi", "Z", "Z_nr", "P_sig/P",
+                        "K/E", "slide", "newton", "steps", "seconds"));
+  double step = -1.0, prev_phi = packing_fraction(packing), prev_P = 0.0;
+  for (size_t level = 0; level < opts.pressures.size(); ++level) {
+    const double P_over_E = opts.pressures[level], P = P_over_E * params.young;
+    LevelReport rep;
+    PetscCall(PetscLogStagePush(stage_solve));
+    PetscCall(AdvanceToPressure(problem, load, P, &step, &rep));
+    PetscCall(PetscLogStagePop());
+    const PackingObservables o = ComputeObservables(problem);
+    // Bulk modulus K = dP/dphi * dphi/deps_v = phi dP/dphi (eps_v = -ln(phi_0/phi)), by
+    // finite differences between successive levels.
+    const double dphi = o.packing_fraction - prev_phi;
+    const double K = dphi != 0.0 ? 0.5 * (o.packing_fraction + prev_phi) * (P - prev_P) / dphi : INFINITY;
+    prev_phi = o.packing_fraction, prev_P = P;
+    PetscCall(PetscPrintf(comm, "  %9.3g %8.5f %6.3f %6.3f %10.7f %8.3g %7d %6" PetscInt_FMT " %6d %8.2f\n", P_over_E,
+                          o.packing_fraction, o.coordination, o.coordination_no_rattlers,
+                          P > 0 ? o.mean_stress / P : 0.0, K / params.young, o.sliding_contacts, rep.newton_its,
+                          rep.substeps, rep.seconds));
+    PetscCall(PetscLogStagePush(stage_output));
+    const double E = params.young;
+    PetscCall(curve.Row({P_over_E, o.packing_fraction, o.coordination, o.coordination_no_rattlers, double(o.rattlers),
+                         o.stress[0] / E, o.stress[1] / E, o.stress[3] / E, o.mean_stress / E, K / E,
+                         o.mean_volumetric_strain, double(o.contacts), double(o.sliding_contacts),
+                         double(rep.newton_its), double(rep.substeps), double(rep.cuts), rep.seconds,
+                         o.max_penetration}));
+    if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
+    PetscCall(PetscLogStagePop());
+  }
+  PetscCall(PetscPrintf(comm, "  wrote %s/curve.csv%s\n", opts.output_dir.c_str(),
+                        opts.write_hdf5 ? " and levels.h5" : ""));
+  PetscFunctionReturn(0);
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+  PetscCall(PetscInitialize(&argc, &argv, nullptr, help));
+  PetscErrorCode ierr = Run(PETSC_COMM_WORLD);
+  if (ierr) {
+    PetscFinalize();
+    return 1;
+  }
+  PetscCall(PetscFinalize());
+  return 0;
+}

@@ -1,0 +1,74 @@
+// Contact kinematics of the mixture's pair types: gap, incremental tangential
+// slip, and their first and second derivatives with respect to the local
+// unknowns of the pair.
+//
+// Local unknowns q (positions, not displacements):
+//   rigid disk     (x, y, theta)   centre and rotation angle, radius r
+//   boundary node  (x, y)          of a deformable disk
+// Conventions: the normal n is a unit vector pointing from the "master" A
+// to the "slave" B (rigid-rigid: from centre A to centre B; node-rigid: from
+// the disk centre to the node; node-segment: the segment's outward normal,
+// which for the counter-clockwise boundaries of DiskMesh is the RIGHT normal
+// of a -> b, n = (e_y, -e_x) / |e| with e = b - a; the left normal would point
+// into the body); the tangent is t = (-n_y, n_x), i.e. counter-clockwise
+// around a rigid master and along a -> b on a segment, so s > 0 means the
+// slave moves counter-clockwise around the master for every pair type.
+// The gap g >= 0 when the bodies are apart.
+//
+// Incremental slip over a load step, with q0 the unknowns at the start of
+// the step and Delta = q - q0, is the tangential displacement of the slave
+// contact point relative to the master's material point, measured with the
+// current tangent (linearized rotation of rigid bodies over a step):
+//   rigid A - rigid B:  g = |c_B - c_A| - r_A - r_B
+//                       s = t . (Delta c_B - Delta c_A) - r_A Delta theta_A - r_B Delta theta_B
+//   rigid A - node p:   g = |p - c_A| - r_A
+//                       s = t . (Delta p - Delta c_A) - r_A Delta theta_A
+//   segment a-b - node p (straight segment of a deformable boundary):
+//                       xi = (p - a).(b - a) / |b - a|^2 (closest point, may leave [0, 1];
+//                            the caller chooses the segment),
+//                       n = right normal of (b - a) / |b - a| (outward, see above),
+//                       g = (p - a) . n (signed distance to the segment's LINE, also
+//                           when xi is outside [0, 1]),  t = (b - a) / |b - a|,
+//                       s = t . (Delta p - (1 - xi) Delta a - xi Delta b)
+// The Hessians are exact (they enter the consistent Newton tangent through
+// the multipliers: -lambda_n d2g - lambda_t d2s); both are symmetric and
+// stored row-major with stride ndof (entries past ndof*ndof stay zero).
+//
+// Degenerate input (coincident centres, |c_B - c_A| <= 1e-12 (r_A + r_B +
+// |c_B0 - c_A0|); collapsed segment, |b - a| <= 1e-12 (|b0 - a0| + |p - a|)):
+// the normal is undefined, so normal = (0, 0), slip = 0 and all derivatives
+// are zero; gap = -r_A - r_B (rigid-rigid, full overlap), -r_A (rigid-node),
+// |p - a| (collapsed segment, reported as open). A zero normal flags this case.
+//
+// Limitations of the incremental slip (relevant to the friction law):
+//  - the rotation is linearised over the step (r Delta theta) while the
+//    relative centre motion is projected on the CURRENT tangent, so s is not
+//    objective for finite step rotations: two touching disks rotated rigidly
+//    together by phi give s = (r_A + r_B)(sin phi - phi) ~ -(r_A + r_B) phi^3 / 6
+//    (exact zero only for pure translations);
+//  - s is relative to the configuration at the step start q0: it assumes the
+//    same pair (and, for segments, the same segment) throughout the step.
+#pragma once
+
+namespace deformix {
+
+struct PairKinematics {
+  static constexpr int kMaxDofs = 6;
+  int ndof = 0;                             // number of local unknowns of the pair
+  double gap = 0.0;
+  double slip = 0.0;                        // incremental tangential slip s
+  double normal[2] = {0.0, 0.0};
+  double dgap[kMaxDofs] = {};               // dg/dq
+  double dslip[kMaxDofs] = {};              // ds/dq
+  double d2gap[kMaxDofs * kMaxDofs] = {};   // d2g/dq2, row-major ndof x ndof
+  double d2slip[kMaxDofs * kMaxDofs] = {};  // d2s/dq2
+};
+
+// q = (xA, yA, thA, xB, yB, thB), q0 the same at the step start.
+PairKinematics rigid_rigid(const double q[6], const double q0[6], double rA, double rB);
+// q = (xA, yA, thA, px, py).
+PairKinematics rigid_node(const double q[5], const double q0[5], double rA);
+// q = (ax, ay, bx, by, px, py).
+PairKinematics segment_node(const double q[6], const double q0[6]);
+
+}  // namespace deformix

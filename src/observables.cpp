@@ -1,0 +1,77 @@
+#include "deformix/observables.hpp"
+
+#include <algorithm>
+#include <set>
+#include <utility>
+
+namespace deformix {
+
+PackingObservables ComputeObservables(const CompactionProblem &problem) {
+  PackingObservables o;
+  const StateSummary s = problem.Summary();
+  o.packing_fraction = s.packing_fraction;
+  o.max_penetration = s.max_penetration;
+  const int np = problem.NumParticles();
+
+  // Particle centres: rigid centres, deformable centroids.
+  std::vector<double> centre(2 * np, 0.0);
+  for (int b = 0; b < static_cast<int>(problem.Bodies().size()); ++b)
+    problem.BodyCentroid(b, &centre[2 * problem.Bodies()[b].particle]);
+  for (int r = 0; r < static_cast<int>(problem.RigidBodies().size()); ++r)
+    problem.RigidPosition(r, &centre[2 * problem.RigidBodies()[r].particle], nullptr);
+
+  std::set<std::pair<int, int>> pairs;
+  std::vector<std::set<int>> neighbours(np);  // force-carrying partners; walls as -1..-4
+  const double V = s.box_width * s.box_height;
+  for (const ContactForce &f : problem.ContactForces()) {
+    if (f.state == kSliding) ++o.sliding_contacts;
+    if (!(f.normal_multiplier > 0.0)) continue;
+    ++o.contacts;
+    const int a = f.master_particle, b = f.slave_particle;
+    double l[2];
+    if (a >= 0) {
+      l[0] = centre[2 * b] - centre[2 * a], l[1] = centre[2 * b + 1] - centre[2 * a + 1];
+      pairs.insert({std::min(a, b), std::max(a, b)});
+      neighbours[a].insert(b), neighbours[b].insert(a);
+    } else {
+      l[0] = -(f.point[0] - centre[2 * b]), l[1] = -(f.point[1] - centre[2 * b + 1]);
+      // Which wall: the force direction tells.
+      const int wall = f.force[0] > 0 ? -1 : f.force[0] < 0 ? -2 : f.force[1] > 0 ? -3 : -4;
+      neighbours[b].insert(wall);
+    }
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) o.stress[2 * i + j] += f.force[i] * l[j] / V;
+  }
+  o.mean_stress = 0.5 * (o.stress[0] + o.stress[3]);
+  o.force_pairs = static_cast<int>(pairs.size());
+  o.coordination = np ? 2.0 * pairs.size() / np : 0.0;
+
+  // Rattlers: fewer than 3 force-carrying contacts (2 with friction), removed iteratively.
+  const size_t min_contacts = problem.Frictional() ? 2 : 3;
+  std::vector<char> rattler(np, 0);
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (int p = 0; p < np; ++p) {
+      if (rattler[p]) continue;
+      size_t count = 0;
+      for (int q : neighbours[p]) count += (q < 0 || !rattler[q]);
+      if (count < min_contacts) rattler[p] = 1, changed = true;
+    }
+  }
+  int n_pairs_nr = 0;
+  for (const auto &pr : pairs) n_pairs_nr += !rattler[pr.first] && !rattler[pr.second];
+  o.rattlers = static_cast<int>(std::count(rattler.begin(), rattler.end(), 1));
+  o.coordination_no_rattlers = np > o.rattlers ? 2.0 * n_pairs_nr / (np - o.rattlers) : 0.0;
+
+  double strain = 0.0;
+  for (int b = 0; b < static_cast<int>(problem.Bodies().size()); ++b) {
+    const std::vector<double> ratio = problem.CellAreaRatio(b);
+    double area = 0.0;
+    for (size_t e = 0; e < ratio.size(); ++e) area += ratio[e] * problem.Bodies()[b].ref_cell_area[e];
+    strain += area / problem.Bodies()[b].ref_area - 1.0;
+  }
+  if (!problem.Bodies().empty()) o.mean_volumetric_strain = strain / problem.Bodies().size();
+  return o;
+}
+
+}  // namespace deformix

@@ -1,0 +1,567 @@
+// Packing generation: diameters, jammed frictionless packing (O'Hern-style
+// FIRE + box bisection with walls), deformable assignment along a Hilbert
+// curve. Plain C++17, no PETSc. Reproducible: random numbers come from the raw
+// std::mt19937_64 output (fully specified by the standard), never from the
+// implementation-defined std::*_distribution classes.
+#include "deformix/packing.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace deformix {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Uniform double in [0, 1) from the top 53 bits of one engine draw.
+double uniform01(std::mt19937_64 &eng) {
+  return static_cast<double>(eng() >> 11) * (1.0 / 9007199254740992.0);
+}
+
+// Uniform integer in [0, m) by rejection (unbiased, platform independent).
+std::uint64_t uniform_index(std::mt19937_64 &eng, std::uint64_t m) {
+  const std::uint64_t limit = std::numeric_limits<std::uint64_t>::max() -
+                              std::numeric_limits<std::uint64_t>::max() % m;
+  std::uint64_t v;
+  do { v = eng(); } while (v >= limit);
+  return v % m;
+}
+
+// Independent stream for a given purpose derived from the user seed.
+std::mt19937_64 make_engine(unsigned seed, std::uint64_t stream) {
+  return std::mt19937_64(static_cast<std::uint64_t>(seed) ^ (0x9E3779B97F4A7C15ull * (stream + 1)));
+}
+
+// ---- cell grid over [x0, x0 + nx h] x [y0, y0 + ny h] ------------------------
+// Points outside are clamped to the border cells. Disks are stored in cell
+// order (counting sort): start[c] .. start[c + 1] in `items`.
+struct CellGrid {
+  double x0 = 0, y0 = 0, h = 1;
+  int nx = 1, ny = 1;
+  std::vector<int> start, items;
+
+  int cx(double x) const { return std::min(nx - 1, std::max(0, static_cast<int>(std::floor((x - x0) / h)))); }
+  int cy(double y) const { return std::min(ny - 1, std::max(0, static_cast<int>(std::floor((y - y0) / h)))); }
+
+  void setup(double xlo, double xhi, double ylo, double yhi, double min_h) {
+    x0 = xlo;
+    y0 = ylo;
+    const double wx = std::max(xhi - xlo, min_h), wy = std::max(yhi - ylo, min_h);
+    nx = std::max(1, static_cast<int>(wx / min_h));
+    ny = std::max(1, static_cast<int>(wy / min_h));
+    // keep the grid size bounded (huge boxes with few disks)
+    while (static_cast<long long>(nx) * ny > 4000000LL) { nx = std::max(1, nx / 2); ny = std::max(1, ny / 2); }
+    h = std::max(wx / nx, wy / ny);
+  }
+
+  void fill(const std::vector<double> &x, const std::vector<double> &y) {
+    const int n = static_cast<int>(x.size());
+    std::vector<int> cell(n);
+    start.assign(static_cast<std::size_t>(nx) * ny + 1, 0);
+    for (int i = 0; i < n; ++i) {
+      cell[i] = cy(y[i]) * nx + cx(x[i]);
+      ++start[cell[i] + 1];
+    }
+    for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
+    items.assign(n, 0);
+    std::vector<int> pos(start.begin(), start.end() - 1);
+    for (int i = 0; i < n; ++i) items[pos[cell[i]]++] = i;
+  }
+};
+
+// All pairs i < j with centre distance < r_i + r_j + extra (cell size must be
+// >= 2 r_max + extra). Deterministic order.
+void build_pairs(const std::vector<double> &x, const std::vector<double> &y, const std::vector<double> &r,
+                 double xlo, double xhi, double ylo, double yhi, double extra,
+                 std::vector<std::pair<int, int>> &pairs) {
+  pairs.clear();
+  const int n = static_cast<int>(x.size());
+  if (n < 2) return;
+  const double rmax = *std::max_element(r.begin(), r.end());
+  CellGrid g;
+  g.setup(xlo, xhi, ylo, yhi, 2 * rmax + extra);
+  g.fill(x, y);
+  static const int off[5][2] = {{0, 0}, {1, 0}, {-1, 1}, {0, 1}, {1, 1}};  // half stencil
+  for (int cy = 0; cy < g.ny; ++cy)
+    for (int cx = 0; cx < g.nx; ++cx) {
+      const int c = cy * g.nx + cx;
+      for (int k = 0; k < 5; ++k) {
+        const int ox = cx + off[k][0], oy = cy + off[k][1];
+        if (ox < 0 || ox >= g.nx || oy >= g.ny) continue;
+        const int o = oy * g.nx + ox;
+        for (int a = g.start[c]; a < g.start[c + 1]; ++a) {
+          const int i = g.items[a];
+          const int b0 = (k == 0) ? a + 1 : g.start[o];
+          for (int b = b0; b < g.start[o + 1]; ++b) {
+            const int j = g.items[b];
+            const double dx = x[j] - x[i], dy = y[j] - y[i], s = r[i] + r[j] + extra;
+            if (dx * dx + dy * dy < s * s) pairs.emplace_back(std::min(i, j), std::max(i, j));
+          }
+        }
+      }
+    }
+}
+
+// ---- soft-disk system in the box [0, L]^2 -------------------------------------
+struct SoftSystem {
+  std::vector<double> x, y, r, fx, fy, vx, vy, xref, yref;
+  std::vector<std::pair<int, int>> pairs;
+  double L = 1;
+  double skin = 0.2;
+  // results of the last force evaluation
+  double energy = 0, max_ov = 0, sum_ov = 0, fmax2 = 0;
+  int n_ov = 0;
+
+  int n() const { return static_cast<int>(x.size()); }
+
+  void rebuild() {
+    build_pairs(x, y, r, 0.0, L, 0.0, L, skin, pairs);
+    xref = x;
+    yref = y;
+  }
+
+  void maybe_rebuild() {
+    const double lim2 = 0.25 * skin * skin;
+    for (int i = 0; i < n(); ++i) {
+      const double dx = x[i] - xref[i], dy = y[i] - yref[i];
+      if (dx * dx + dy * dy > lim2) { rebuild(); return; }
+    }
+  }
+
+  void forces() {
+    const int nn = n();
+    std::fill(fx.begin(), fx.end(), 0.0);
+    std::fill(fy.begin(), fy.end(), 0.0);
+    energy = 0;
+    max_ov = 0;
+    sum_ov = 0;
+    n_ov = 0;
+    for (const auto &p : pairs) {
+      const int i = p.first, j = p.second;
+      const double dx = x[j] - x[i], dy = y[j] - y[i], s = r[i] + r[j];
+      const double d2 = dx * dx + dy * dy;
+      if (d2 >= s * s) continue;
+      const double d = std::sqrt(d2);
+      const double ov = s - d;
+      energy += 0.5 * ov * ov;
+      sum_ov += ov;
+      ++n_ov;
+      max_ov = std::max(max_ov, ov);
+      if (d > 0) {
+        const double f = ov / d;
+        fx[i] -= f * dx;
+        fy[i] -= f * dy;
+        fx[j] += f * dx;
+        fy[j] += f * dy;
+      } else {  // coincident centres: push apart along x (deterministic)
+        fx[i] -= ov;
+        fx[j] += ov;
+      }
+    }
+    for (int i = 0; i < nn; ++i) {
+      const double ri = r[i];
+      const double ovs[4] = {ri - x[i], x[i] + ri - L, ri - y[i], y[i] + ri - L};
+      for (int w = 0; w < 4; ++w) {
+        const double ov = ovs[w];
+        if (ov <= 0) continue;
+        energy += 0.5 * ov * ov;
+        sum_ov += ov;
+        ++n_ov;
+        max_ov = std::max(max_ov, ov);
+        switch (w) {
+          case 0: fx[i] += ov; break;
+          case 1: fx[i] -= ov; break;
+          case 2: fy[i] += ov; break;
+          default: fy[i] -= ov; break;
+        }
+      }
+    }
+    fmax2 = 0;
+    for (int i = 0; i < nn; ++i) fmax2 = std::max(fmax2, fx[i] * fx[i] + fy[i] * fy[i]);
+  }
+
+  void set_box(double Lnew) {
+    const double s = Lnew / L;
+    for (int i = 0; i < n(); ++i) {
+      x[i] *= s;
+      y[i] *= s;
+    }
+    L = Lnew;
+    rebuild();
+  }
+};
+
+enum class MinResult { kUnjammed, kJammed, kCapped };
+
+// FIRE (Bitzek et al. 2006, with the FIRE 2.0 half-step correction of Guenole
+// et al. 2020), unit masses, semi-implicit Euler. Stops when
+//  - no overlap is left or the largest overlap < unjammed_ov: unjammed;
+//  - the largest net force < force_rel * mean overlap (= mean contact force):
+//    force-balanced with U > 0, jammed;
+//  - max_it steps: capped (classified by the caller).
+MinResult fire_minimize(SoftSystem &s, double unjammed_ov, double force_rel, int max_it, long long &iters) {
+  const double dt0 = 0.1, dt_max = 0.5, dt_min = 1e-3;
+  const double f_inc = 1.1, f_dec = 0.5, alpha0 = 0.1, f_alpha = 0.99;
+  const int n_delay = 5;
+  const int nn = s.n();
+  std::fill(s.vx.begin(), s.vx.end(), 0.0);
+  std::fill(s.vy.begin(), s.vy.end(), 0.0);
+  double dt = dt0, alpha = alpha0;
+  int n_pos = 0;
+  s.forces();
+  for (int it = 0;; ++it) {
+    if (s.n_ov == 0 || s.max_ov < unjammed_ov) return MinResult::kUnjammed;
+    const double fmean = s.sum_ov / s.n_ov;
+    if (s.fmax2 < force_rel * force_rel * fmean * fmean) return MinResult::kJammed;
+    if (it >= max_it) return MinResult::kCapped;
+    ++iters;
+    double P = 0, vv = 0, ff = 0;
+    for (int i = 0; i < nn; ++i) {
+      P += s.fx[i] * s.vx[i] + s.fy[i] * s.vy[i];
+      vv += s.vx[i] * s.vx[i] + s.vy[i] * s.vy[i];
+      ff += s.fx[i] * s.fx[i] + s.fy[i] * s.fy[i];
+    }
+    if (P > 0) {
+      if (++n_pos > n_delay) {
+        dt = std::min(dt * f_inc, dt_max);
+        alpha *= f_alpha;
+      }
+    } else {
+      n_pos = 0;
+      if (dt * f_dec >= dt_min) dt *= f_dec;
+      alpha = alpha0;
+      for (int i = 0; i < nn; ++i) {
+        s.x[i] -= 0.5 * dt * s.vx[i];
+        s.y[i] -= 0.5 * dt * s.vy[i];
+        s.vx[i] = 0;
+        s.vy[i] = 0;
+      }
+      vv = 0;
+    }
+    // MD step, then FIRE mixing with the updated velocity.
+    vv = 0;
+    for (int i = 0; i < nn; ++i) {
+      s.vx[i] += dt * s.fx[i];
+      s.vy[i] += dt * s.fy[i];
+      vv += s.vx[i] * s.vx[i] + s.vy[i] * s.vy[i];
+    }
+    const double mix = (ff > 0) ? alpha * std::sqrt(vv / ff) : 0.0;
+    for (int i = 0; i < nn; ++i) {
+      s.vx[i] = (1 - alpha) * s.vx[i] + mix * s.fx[i];
+      s.vy[i] = (1 - alpha) * s.vy[i] + mix * s.fy[i];
+      s.x[i] += dt * s.vx[i];
+      s.y[i] += dt * s.vy[i];
+    }
+    s.maybe_rebuild();
+    s.forces();
+  }
+}
+
+// Random sequential placement of non-overlapping disks (gap >= 0) inside [0, L]^2.
+void random_placement(SoftSystem &s, std::mt19937_64 &eng) {
+  const int n = s.n();
+  const double rmax = *std::max_element(s.r.begin(), s.r.end());
+  const double h = 2 * rmax;
+  const int nc = std::max(1, static_cast<int>(s.L / h));
+  const double hc = s.L / nc;
+  std::vector<std::vector<int>> cells(static_cast<std::size_t>(nc) * nc);
+  auto cell_of = [&](double v) { return std::min(nc - 1, std::max(0, static_cast<int>(v / hc))); };
+  const long long max_tries = 100000000LL;
+  long long tries = 0;
+  for (int i = 0; i < n; ++i) {
+    const double ri = s.r[i];
+    if (2 * ri > s.L) throw std::runtime_error("make_jammed_packing: box smaller than a disk");
+    for (;;) {
+      if (++tries > max_tries)
+        throw std::runtime_error("make_jammed_packing: random placement failed; lower opts.initial_fraction");
+      const double xi = ri + uniform01(eng) * (s.L - 2 * ri);
+      const double yi = ri + uniform01(eng) * (s.L - 2 * ri);
+      const int cx = cell_of(xi), cy = cell_of(yi);
+      const int reach = static_cast<int>(std::ceil((ri + rmax) / hc));
+      bool ok = true;
+      for (int oy = std::max(0, cy - reach); ok && oy <= std::min(nc - 1, cy + reach); ++oy)
+        for (int ox = std::max(0, cx - reach); ok && ox <= std::min(nc - 1, cx + reach); ++ox)
+          for (int j : cells[static_cast<std::size_t>(oy) * nc + ox]) {
+            const double dx = s.x[j] - xi, dy = s.y[j] - yi, d = ri + s.r[j];
+            if (dx * dx + dy * dy < d * d) { ok = false; break; }
+          }
+      if (!ok) continue;
+      s.x[i] = xi;
+      s.y[i] = yi;
+      cells[static_cast<std::size_t>(cy) * nc + cx].push_back(i);
+      break;
+    }
+  }
+}
+
+// Hilbert index of (x, y) in [0, 2^order)^2 (Wikipedia's xy2d). Each
+// quadrant of the square is a contiguous quarter of the index range.
+std::uint64_t hilbert_index(std::uint32_t x, std::uint32_t y, int order) {
+  const std::uint32_t n = 1u << order;
+  std::uint64_t d = 0;
+  for (std::uint32_t s = n / 2; s > 0; s /= 2) {
+    const std::uint32_t rx = (x & s) ? 1u : 0u, ry = (y & s) ? 1u : 0u;
+    d += static_cast<std::uint64_t>(s) * s * ((3u * rx) ^ ry);
+    if (ry == 0) {
+      if (rx == 1) {
+        x = n - 1 - x;
+        y = n - 1 - y;
+      }
+      std::swap(x, y);
+    }
+  }
+  return d;
+}
+
+}  // namespace
+
+std::vector<double> sample_diameters(int n, unsigned seed, double d_min, double d_max) {
+  if (n < 0) throw std::invalid_argument("sample_diameters: n must be >= 0");
+  if (!(d_min > 0) || !(d_max >= d_min) || !std::isfinite(d_max))
+    throw std::invalid_argument("sample_diameters: need 0 < d_min <= d_max < inf");
+  std::mt19937_64 eng = make_engine(seed, 0);
+  const double a = 1.0 / d_min, b = 1.0 / d_min - 1.0 / d_max;
+  std::vector<double> d(n);
+  for (int i = 0; i < n; ++i) {
+    const double u = uniform01(eng);
+    d[i] = std::min(d_max, std::max(d_min, 1.0 / (a - u * b)));
+  }
+  return d;
+}
+
+DiskPacking make_jammed_packing(int n, unsigned seed, const PackingOptions &opts) {
+  return make_jammed_packing(n, seed, opts, nullptr);
+}
+
+DiskPacking make_jammed_packing(int n, unsigned seed, const PackingOptions &opts, JammingStats *stats) {
+  if (n < 1) throw std::invalid_argument("make_jammed_packing: n must be >= 1");
+  if (!(opts.initial_fraction > 0 && opts.initial_fraction <= 0.5))
+    throw std::invalid_argument("make_jammed_packing: opts.initial_fraction must be in (0, 0.5]");
+  if (!(opts.target_overlap > 0 && opts.target_overlap < 0.1))
+    throw std::invalid_argument("make_jammed_packing: opts.target_overlap must be in (0, 0.1)");
+  if (opts.max_iterations < 1) throw std::invalid_argument("make_jammed_packing: opts.max_iterations must be >= 1");
+
+  const std::vector<double> d = sample_diameters(n, seed, opts.d_min, opts.d_max);
+  double dmean = 0, area = 0;
+  for (double di : d) {
+    dmean += di;
+    area += 0.25 * kPi * di * di;
+  }
+  dmean /= n;
+
+  SoftSystem s;
+  s.r.resize(n);
+  for (int i = 0; i < n; ++i) s.r[i] = 0.5 * d[i];
+  s.x.assign(n, 0);
+  s.y.assign(n, 0);
+  s.fx.assign(n, 0);
+  s.fy.assign(n, 0);
+  s.vx.assign(n, 0);
+  s.vy.assign(n, 0);
+  s.skin = 0.3 * dmean;
+  double phi = opts.initial_fraction;
+  s.L = std::sqrt(area / phi);
+  std::mt19937_64 eng = make_engine(seed, 1);
+  random_placement(s, eng);
+  s.rebuild();
+
+  const double tol = opts.target_overlap * dmean;
+  const double unjammed_ov = 1e-2 * tol;  // "no overlap left"
+  const double force_rel = 1e-4;          // force balance (net force / mean contact force) while bisecting
+  const double force_final = 1e-6;        // ... and for the accepted state
+  const int polish_cap = 200000;
+  double dphi = 0.01;
+  int direction = +1;
+  JammingStats st;
+  st.mean_diameter = dmean;
+  for (int outer = 0;; ++outer) {
+    if (dphi < 1e-15 || outer > 100000) {
+      std::ostringstream msg;
+      msg << "make_jammed_packing: box bisection did not reach max overlap <= " << opts.target_overlap
+          << " <d> (phi = " << phi << ", step " << dphi << "); raise opts.max_iterations";
+      throw std::runtime_error(msg.str());
+    }
+    phi += direction * dphi;
+    s.set_box(std::sqrt(area / phi));
+    ++st.minimizations;
+    MinResult res = fire_minimize(s, unjammed_ov, force_rel, opts.max_iterations, st.fire_iterations);
+    if (res == MinResult::kJammed && s.max_ov <= tol) {
+      // Candidate: polish the force balance to force_final so that the
+      // contact network is the converged one, then re-classify.
+      ++st.minimizations;
+      // (Capped at polish_cap steps: at very low pressure FIRE converges
+      // slowly; the state is already balanced to force_rel.)
+      res = fire_minimize(s, unjammed_ov, force_final, std::min(opts.max_iterations, polish_cap), st.fire_iterations);
+      if (res != MinResult::kUnjammed && s.max_ov <= tol) break;  // jammed at vanishing overlap
+    } else if (res == MinResult::kCapped) {
+      ++st.capped_minimizations;
+    }
+    if (res != MinResult::kUnjammed) {  // overlap remains (capped: the box is too small for now)
+      if (direction > 0) {
+        dphi *= 0.5;
+        direction = -1;
+      }
+    } else if (direction < 0) {
+      dphi *= 0.5;
+      direction = +1;
+    }
+  }
+
+  st.energy = s.energy / (dmean * dmean);
+  st.max_overlap = s.max_ov / dmean;
+  st.residual_force = std::sqrt(s.fmax2) / (s.sum_ov / s.n_ov);
+  if (stats) *stats = st;
+
+  DiskPacking p;
+  p.x = s.x;
+  p.y = s.y;
+  p.radius = s.r;
+  p.deformable.assign(n, 0);
+  p.walls[0] = 0;
+  p.walls[1] = s.L;
+  p.walls[2] = 0;
+  p.walls[3] = s.L;
+  return p;
+}
+
+void assign_deformable(DiskPacking &packing, double kappa, unsigned seed) {
+  if (!(kappa >= 0.0 && kappa <= 1.0)) {
+    std::ostringstream msg;
+    msg << "assign_deformable: kappa (deformable area fraction) must be in [0, 1], got " << kappa;
+    throw std::invalid_argument(msg.str());
+  }
+  const int n = packing.size();
+  packing.deformable.assign(n, 0);
+  if (n == 0) return;
+  const int order = 16;
+  const double side = static_cast<double>(1u << order);
+  const double xl = packing.walls[0], yb = packing.walls[2];
+  const double wx = packing.walls[1] - xl, wy = packing.walls[3] - yb;
+  auto grid = [&](double v, double lo, double w) -> std::uint32_t {
+    const double t = (w > 0) ? (v - lo) / w * side : 0.0;
+    return static_cast<std::uint32_t>(std::min(side - 1, std::max(0.0, std::floor(t))));
+  };
+  std::mt19937_64 eng = make_engine(seed, 2);
+  struct Key {
+    std::uint64_t h, tie;
+    int i;
+  };
+  std::vector<Key> keys(n);
+  for (int i = 0; i < n; ++i)
+    keys[i] = {hilbert_index(grid(packing.x[i], xl, wx), grid(packing.y[i], yb, wy), order), eng(), i};
+  std::sort(keys.begin(), keys.end(), [](const Key &a, const Key &b) {
+    return a.h != b.h ? a.h < b.h : (a.tie != b.tie ? a.tie < b.tie : a.i < b.i);
+  });
+  const std::size_t start = static_cast<std::size_t>(uniform_index(eng, static_cast<std::uint64_t>(n)));
+  double err = 0;  // accumulated target area minus marked area
+  for (int k = 0; k < n; ++k) {
+    const int i = keys[(start + k) % n].i;
+    const double a = kPi * packing.radius[i] * packing.radius[i];
+    err += kappa * a;
+    if (err > 0.5 * a) {
+      packing.deformable[i] = 1;
+      err -= a;
+    }
+  }
+}
+
+double packing_fraction(const DiskPacking &packing) {
+  double area = 0;
+  for (double r : packing.radius) area += kPi * r * r;
+  const double box = (packing.walls[1] - packing.walls[0]) * (packing.walls[3] - packing.walls[2]);
+  if (!(box > 0)) throw std::invalid_argument("packing_fraction: box has non-positive area");
+  return area / box;
+}
+
+ContactNetwork contact_network(const DiskPacking &packing, double gap_tol) {
+  ContactNetwork net;
+  const int n = packing.size();
+  if (n == 0) return net;
+  std::vector<std::pair<int, int>> pairs;
+  build_pairs(packing.x, packing.y, packing.radius, packing.walls[0], packing.walls[1], packing.walls[2],
+              packing.walls[3], std::max(0.0, gap_tol), pairs);
+  std::sort(pairs.begin(), pairs.end());
+  for (const auto &p : pairs) {
+    const int i = p.first, j = p.second;
+    const double dx = packing.x[j] - packing.x[i], dy = packing.y[j] - packing.y[i];
+    const double gap = std::sqrt(dx * dx + dy * dy) - packing.radius[i] - packing.radius[j];
+    if (gap < gap_tol) {
+      net.i.push_back(i);
+      net.j.push_back(j);
+      net.gap.push_back(gap);
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    const double r = packing.radius[i];
+    const double gaps[4] = {packing.x[i] - r - packing.walls[0], packing.walls[1] - packing.x[i] - r,
+                            packing.y[i] - r - packing.walls[2], packing.walls[3] - packing.y[i] - r};
+    for (int w = 0; w < 4; ++w)
+      if (gaps[w] < gap_tol) {
+        net.i.push_back(i);
+        net.j.push_back(-1 - w);
+        net.gap.push_back(gaps[w]);
+      }
+  }
+  return net;
+}
+
+double max_overlap(const DiskPacking &packing) {
+  const ContactNetwork net = contact_network(packing, 0.0);
+  double m = 0;
+  for (double g : net.gap) m = std::max(m, -g);
+  return m;
+}
+
+Coordination coordination(const DiskPacking &packing, const ContactNetwork &contacts, int min_contacts) {
+  const int n = packing.size();
+  Coordination c;
+  c.rattler.assign(n, 0);
+  std::vector<int> count(n, 0);
+  std::vector<std::vector<int>> partners(n);
+  for (int k = 0; k < contacts.size(); ++k) {
+    ++count[contacts.i[k]];
+    if (contacts.j[k] >= 0) {
+      ++count[contacts.j[k]];
+      partners[contacts.i[k]].push_back(contacts.j[k]);
+      partners[contacts.j[k]].push_back(contacts.i[k]);
+    }
+  }
+  std::vector<int> stack;
+  for (int i = 0; i < n; ++i)
+    if (count[i] < min_contacts) {
+      c.rattler[i] = 1;
+      stack.push_back(i);
+    }
+  while (!stack.empty()) {  // removing a rattler may make its partners rattlers
+    const int i = stack.back();
+    stack.pop_back();
+    for (int j : partners[i])
+      if (!c.rattler[j] && --count[j] < min_contacts) {
+        c.rattler[j] = 1;
+        stack.push_back(j);
+      }
+  }
+  for (int k = 0; k < contacts.size(); ++k) {
+    const int a = contacts.i[k], b = contacts.j[k];
+    if (c.rattler[a]) continue;
+    if (b < 0) ++c.wall_contacts;
+    else if (!c.rattler[b]) ++c.pair_contacts;
+  }
+  for (int i = 0; i < n; ++i) c.non_rattlers += c.rattler[i] ? 0 : 1;
+  if (c.non_rattlers > 0) {
+    c.z = (2.0 * c.pair_contacts + c.wall_contacts) / c.non_rattlers;
+    c.z_mirror = 2.0 * (c.pair_contacts + c.wall_contacts) / c.non_rattlers;
+  }
+  c.rattler_fraction = n > 0 ? static_cast<double>(n - c.non_rattlers) / n : 0.0;
+  return c;
+}
+
+}  // namespace deformix
