@@ -6,11 +6,32 @@
 // every ring lies on the positive x axis.
 //
 // Triangles: the annulus between rings k-1 and k splits into 6 sectors of
-// angle pi/3. A sector sees k vertices of the inner ring and k+1 of the outer
-// ring (end points shared with the neighbouring sectors). The two sequences
+// angle pi/3. A sector sees k vertices of the inner ring, a_0..a_{k-1} at
+// sector fractions i/(k-1), and k+1 of the outer ring, b_0..b_k at fractions
+// o/k (end points shared with the neighbouring sectors). The two sequences
 // are zipped by angle: at each step the ring whose next vertex comes first
 // in angle advances, which gives (k-1) + k = 2k-1 triangles per sector and
 // 6(2k-1) per annulus, all counter-clockwise and of nearly equal area.
+//
+// Mirror symmetry. Since o/k < o/(k-1) < (o+1)/k for 1 <= o < k-1, the
+// zipper strictly alternates, outer, inner, outer, ..., inner, outer, and its
+// rungs (the edges a_i b_o between consecutive triangles, plus the two
+// sector edges a_0 b_0 and a_{k-1} b_k) are a_j b_j and a_j b_{j+1} for
+// j = 0..k-1; the only tie is at the far edge of the sector (both next
+// fractions 1), where it is broken towards the inner ring. The reflection
+// about the sector bisector maps a_i -> a_{k-1-i}, b_o -> b_{k-o}, hence
+// rung a_j b_{j+1} <-> a_{k-1-j} b_{k-1-j}: the rung set, and so the triangulation, of every sector is
+// symmetric about its bisector. The middle (k-th) triangle is its own
+// mirror image: for even k it is (a_{k/2-1}, b_{k/2}, a_{k/2}), the outer
+// vertex on the bisector joined to both inner neighbours; for odd k it is
+// (a_{(k-1)/2}, b_{(k-1)/2}, b_{(k+1)/2}), the inner vertex on the bisector
+// joined to both outer neighbours (exactly one of rings k-1, k has a vertex
+// on the bisector, so no quadrilateral is ever left ambiguous). Bisector
+// symmetry plus the 6-fold rotational symmetry gives symmetry about every
+// multiple of 30 degrees, in particular about the x axis (y -> -y) and the
+// y axis (x -> -x). Vertex and mid-edge positions are computed so that the
+// mirror images are exact (see circle_point), which makes the unrotated
+// disk an exactly symmetric configuration.
 //
 // Order 2: one mid-edge node per edge, shared by the two triangles on it.
 // Interior edges get the straight midpoint; an edge joining two vertices of
@@ -37,20 +58,40 @@ int ring_vertex(int k, int j) {
   return ring_offset(k) + ((j % count) + count) % count;
 }
 
-// Point at angle 2 pi num / den on the circle of radius r. The four cardinal
+// Point at angle 2 pi num / den on the circle of radius r (den even, which
+// holds for every caller: 6k and 12n). The angle is folded into the first
+// quadrant by the mirrors y -> -y (num -> den - num) and x -> -x
+// (num -> den/2 - num) before cos/sin are evaluated, so mirror-image angles
+// give coordinates that are exact negatives of each other, and the mesh is
+// mirror-symmetric bit for bit, not just to round-off. The four cardinal
 // directions are returned exactly, because walls first touch the disk there
 // and contact tests compare these coordinates.
 void circle_point(double r, int num, int den, double &x, double &y) {
-  if ((4 * num) % den == 0) {
-    const int quarter = (4 * num / den) % 4;
-    const double c[4] = {1.0, 0.0, -1.0, 0.0}, s[4] = {0.0, 1.0, 0.0, -1.0};
-    x = r * c[quarter];
-    y = r * s[quarter];
-    return;
+  int m = ((num % den) + den) % den;
+  double sx = 1.0, sy = 1.0;
+  if (2 * m > den) {  // lower half plane: mirror y -> -y
+    m = den - m;
+    sy = -1.0;
   }
-  const double t = 2.0 * std::acos(-1.0) * num / den;
-  x = r * std::cos(t);
-  y = r * std::sin(t);
+  if (4 * m > den) {  // second quadrant: mirror x -> -x
+    m = den / 2 - m;
+    sx = -1.0;
+  }
+  // Now 0 <= m <= den/4, i.e. the angle lies in [0, pi/2].
+  double c, s;
+  if (m == 0) {
+    c = 1.0;
+    s = 0.0;
+  } else if (4 * m == den) {
+    c = 0.0;
+    s = 1.0;
+  } else {
+    const double t = 2.0 * std::acos(-1.0) * m / den;
+    c = std::cos(t);
+    s = std::sin(t);
+  }
+  x = sx * r * c;
+  y = sy * r * s;
 }
 
 }  // namespace
@@ -99,9 +140,14 @@ DiskMesh make_disk_mesh(double radius, int target_triangles, int order) {
         const int a = ring_vertex(k - 1, s * inner_count + i);
         const int b = ring_vertex(k, s * k + o);
         // Compare the angles of the next inner and next outer vertex as
-        // sector fractions (i+1)/(k-1) and (o+1)/k without division.
+        // sector fractions (i+1)/(k-1) and (o+1)/k without division. They
+        // tie only at the sector's far edge (both fractions 1), and the tie
+        // must go to the inner ring: the sector then ends with the triangle
+        // (a_{k-1}, b_{k-1}, b_k), the mirror image of its first triangle
+        // (a_0, b_0, b_1), and the whole sector is symmetric about its
+        // bisector (see the comment at the top of this file).
         const bool advance_outer =
-            i == inner_count || (o < k && (o + 1) * inner_count <= (i + 1) * k);
+            i == inner_count || (o < k && (o + 1) * inner_count < (i + 1) * k);
         if (advance_outer) {
           tri.insert(tri.end(), {a, b, ring_vertex(k, s * k + o + 1)});
           ++o;

@@ -433,14 +433,19 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
       for (int j = 0; j < 4; ++j) entry(wall_off + i, wall_off + j, H[4 * i + j]);
   }
 
-  // Proximal term on the Newton step: rho on the diagonal of every body and
-  // wall unknown (rho r^2 on rigid rotations, which are angles).
-  if (need_K) {
-    const double rho = rho_;
-    std::vector<double> diag(rot_off, rho);
+  // Proximal terms on body and wall unknowns, weighted by D (r^2 on rigid
+  // rotations, which are angles): rho D on the Newton matrix only, and
+  // rho_a D (z - z_a) on both the residual and the matrix (pseudo-transient
+  // continuation towards equilibrium, see Solve).
+  if (need_K || (F && rho_anchor_ > 0.0)) {
+    std::vector<double> weight(rot_off, 1.0);
     if (Frictional())
-      for (const RigidBody &r : rigid_) diag[r.dof_offset + 2] = rho * r.radius * r.radius;
-    for (PetscInt i = 0; i < rot_off; ++i) entry(i, i, diag[i]);
+      for (const RigidBody &r : rigid_) weight[r.dof_offset + 2] = r.radius * r.radius;
+    const double rho = params_.prox_eta * params_.young;
+    if (F && rho_anchor_ > 0.0)
+      for (PetscInt i = 0; i < rot_off; ++i) F[i] += rho_anchor_ * weight[i] * (z[i] - anchor_[i]);
+    if (need_K)
+      for (PetscInt i = 0; i < rot_off; ++i) entry(i, i, (rho + rho_anchor_) * weight[i]);
   }
 
   // Rotation gauge of frictionless bodies: c_b(u) = G_b . u = mean of X x u = 0,
@@ -547,16 +552,6 @@ PetscErrorCode FormJacobian(SNES snes, Vec z, Mat J, Mat, void *ctx) {
   const PetscScalar *za;
   PetscFunctionBeginUser;
   PetscCall(PetscLogEventBegin(event_jacobian, 0, 0, 0, 0));
-  // Proximal weight, switched evolution relaxation: rho = prox_initial * P at
-  // the first iterate, then proportional to the residual (which keeps
-  // Newton's quadratic rate), never below prox_eta * E.
-  const double rho_min = p->params_.prox_eta * p->params_.young;
-  p->rho_ = rho_min;
-  if (snes && p->fnorm0_ > 0.0) {
-    PetscReal fnorm;
-    PetscCall(SNESGetFunctionNorm(snes, &fnorm));
-    p->rho_ = std::max(rho_min, p->params_.prox_initial * p->pressure_ * fnorm / p->fnorm0_);
-  }
   PetscCall(p->Gather(z));
   PetscCall(VecGetArrayRead(p->zall_, &za));
   p->coo_values_.clear();
@@ -591,13 +586,29 @@ PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal, Pet
   PetscFunctionReturn(0);
 }
 
-static PetscErrorCode NewtonMonitor(SNES, PetscInt it, PetscReal fnorm, void *ctx) {
+PetscErrorCode NewtonMonitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx) {
   auto *p = static_cast<CompactionProblem *>(ctx);
   int closed = 0, sliding = 0;
   PetscFunctionBeginUser;
   for (char a : p->ActiveSet()) closed += a == kClosed, sliding += a == kSliding;
-  PetscCall(PetscPrintf(PETSC_COMM_WORLD, "    newton %2" PetscInt_FMT "  |R| %.3e  closed contacts %d  sliding %d\n", it,
-                        (double)fnorm, closed, sliding));
+  // Largest entry of the last Newton update and the kind of unknown it belongs to.
+  char where[64] = "";
+  if (it > 0) {
+    Vec dz;
+    PetscInt imax;
+    PetscReal dmax;
+    PetscCall(SNESGetSolutionUpdate(snes, &dz));
+    PetscCall(VecMax(dz, &imax, &dmax));
+    PetscReal dmin;
+    PetscInt imin;
+    PetscCall(VecMin(dz, &imin, &dmin));
+    if (-dmin > dmax) dmax = -dmin, imax = imin;
+    const char *kind = imax < p->WallOffset() ? "body" : imax < p->GaugeOffset() ? "wall" :
+                       imax < p->MultiplierOffset() ? "gauge" : imax < p->TangentialOffset() ? "lambda_n" : "lambda_t";
+    PetscCall(PetscSNPrintf(where, sizeof(where), "  max|dz| %.2e (%s %" PetscInt_FMT ")", (double)dmax, kind, imax));
+  }
+  PetscCall(PetscPrintf(PETSC_COMM_WORLD, "    newton %2" PetscInt_FMT "  |R| %.3e  closed contacts %d  sliding %d  rho_a %.1e%s\n",
+                        it, (double)fnorm, closed, sliding, p->rho_anchor_, where));
   PetscFunctionReturn(0);
 }
 
@@ -708,18 +719,41 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   }
   pressure_ = pressure;
   PetscCall(RefreshCandidates());
+  // Pseudo-transient continuation. With prox_initial > 0 the equations get the
+  // term rho_a D (z - z_a), z_a the state at the start of the inner solve:
+  // each SNES solve is then an implicit step of a damped dynamics in which
+  // rattlers, free rotations and sliding particles move a bounded distance.
+  // After every inner solve the anchor moves to the solution and rho_a falls
+  // tenfold when the solve was easy (grows tenfold when it failed); the level
+  // is converged when the residual WITHOUT the term is below tolerance, so the
+  // regularization has vanished at the accepted equilibrium.
   const double pen_tol = 1e-9 * mean_diameter_;
-  for (int refresh = 0;; ++refresh) {
+  const double rho_floor = params_.prox_eta * params_.young, rho_ceiling = 1e3 * params_.young;
+  rho_anchor_ = params_.prox_initial * pressure;
+  double rho_last = rho_anchor_;
+  const int max_outer = 60;
+  for (int outer = 0, refresh = 0;; ++outer) {
     if (!snes_) PetscCall(SetUpLayout());
+    anchor_.assign(u_.begin(), u_.end());
+    anchor_.insert(anchor_.end(), w_, w_ + 4);
     PetscCall(PackState(z_));
     active_checked_.clear();
     PetscCall(SNESSolve(snes_, nullptr, z_));
     PetscInt its;
+    PetscReal atol, rtol, stol;
+    PetscInt maxit, maxf;
+    PetscCall(SNESGetTolerances(snes_, &atol, &rtol, &stol, &maxit, &maxf));
     PetscCall(SNESGetIterationNumber(snes_, &its));
     PetscCall(SNESGetConvergedReason(snes_, &report->reason));
     report->newton_its += its;
     PetscCall(SNESGetFunctionNorm(snes_, &report->residual));
     if (report->reason <= 0) {
+      // Retry from the anchor with a stronger damping, or give up.
+      if (rho_last > 0.0 && outer < max_outer && 10.0 * rho_last <= rho_ceiling) {
+        rho_anchor_ = rho_last = 10.0 * std::max(rho_last, rho_floor);
+        continue;
+      }
+      rho_anchor_ = 0.0;
       RestoreState(saved);
       pressure_ = saved_pressure;
       u_start_ = u_;
@@ -740,10 +774,28 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       auto it = current.find(CandidateKey(c));
       if (it == current.end() || it->second != c.segment) stale = true;
     }
-    if (!stale || refresh >= 5) break;
-    PetscCall(RefreshCandidates());
-    ++report->candidate_refreshes;
+    if (stale && refresh < 5) {
+      PetscCall(RefreshCandidates());
+      ++report->candidate_refreshes;
+      ++refresh;
+      continue;
+    }
+    if (rho_anchor_ == 0.0) break;
+    // Equilibrium test without the pseudo-transient term.
+    const std::vector<char> active_inner = active_now_;
+    const double rho_used = rho_anchor_;
+    rho_anchor_ = 0.0;
+    PetscReal true_norm;
+    PetscCall(FormFunction(nullptr, z_, r_, this));
+    PetscCall(VecNorm(r_, NORM_2, &true_norm));
+    report->residual = true_norm;
+    if (true_norm <= atol && active_now_ == active_inner) break;
+    PetscCheck(outer < max_outer, comm_, PETSC_ERR_NOT_CONVERGED, "pseudo-transient continuation did not settle");
+    rho_anchor_ = its <= 4 ? 0.1 * rho_used : rho_used;
+    if (rho_anchor_ < rho_floor) rho_anchor_ = rho_floor;
+    rho_last = rho_anchor_;
   }
+  rho_anchor_ = 0.0;
   report->converged = true;
   for (char a : active_now_) report->active_contacts += a != kOpen;
   previous_ = saved;

@@ -1,9 +1,11 @@
 // Disk mesher tests: counts, orientation, conformity, boundary ordering,
-// quality and the area of the isoparametric (order 2) versus straight-sided
+// quality, mirror symmetry about both axes and the area of the isoparametric (order 2) versus straight-sided
 // (order 1) disk.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <set>
 #include <stdexcept>
@@ -19,6 +21,20 @@ namespace {
 
 const double kPi = std::acos(-1.0);
 const int kTargets[] = {92, 368, 968, 3872};
+
+// Ring counts for the symmetry and quality checks.
+const int kSymmetryRings[] = {1, 2, 3, 4, 5, 6, 7, 8, 13, 25};
+
+// Node coordinates rounded to 1e-12 (after the mirror (x, y) -> (sx x, sy y)).
+using Point = std::pair<long long, long long>;
+Point rounded(const DiskMesh &m, int node, double sx, double sy) {
+  return {std::llround(sx * m.X[2 * node] * 1e12), std::llround(sy * m.X[2 * node + 1] * 1e12)};
+}
+
+std::vector<Point> sorted(std::vector<Point> points) {
+  std::sort(points.begin(), points.end());
+  return points;
+}
 
 double node_radius(const DiskMesh &m, int node) { return std::hypot(m.X[2 * node], m.X[2 * node + 1]); }
 
@@ -167,13 +183,98 @@ TEST(DiskMesh, NodesWhereWallsFirstTouch) {
 }
 
 TEST(DiskMesh, MinimumAngle) {
-  // Measured: 30.0 degrees at every size (92, 368, 968, 3872); the ring
-  // construction keeps the same worst triangle shapes as it refines.
-  for (int target : kTargets) {
-    const double angle = min_angle_degrees(make_disk_mesh(0.5, target, 2));
-    std::printf("target %4d triangles: min angle %.3f deg\n", target, angle);
-    EXPECT_GT(angle, 29.5);
-    EXPECT_NEAR(min_angle_degrees(make_disk_mesh(0.5, target, 1)), angle, 1e-12);
+  // Measured: 60.0 (n = 1), 47.588 (n = 2, 3), 47.337 (4), 46.591 (5),
+  // 46.098 (6), 45.748 (7), 45.487 (8), 44.787 (13), 44.253 (25) degrees,
+  // decreasing towards about 43.7 (43.75 at n = 200): the worst triangle is
+  // the one at a sector edge, nearly right-angled with legs h and pi h / 3.
+  // (The previous, non-symmetric zipper had 30.0 at every size.)
+  for (int n : kSymmetryRings) {
+    const double angle = min_angle_degrees(make_disk_mesh(0.5, 6 * n * n, 2));
+    std::printf("n = %2d (%4d triangles): min angle %.3f deg\n", n, 6 * n * n, angle);
+    EXPECT_GT(angle, 43.5);
+    EXPECT_NEAR(min_angle_degrees(make_disk_mesh(0.5, 6 * n * n, 1)), angle, 1e-12);
+  }
+  for (int target : kTargets) EXPECT_GT(min_angle_degrees(make_disk_mesh(0.5, target, 2)), 43.5);
+}
+
+TEST(DiskMesh, RingStructureForSmallAndLargeMeshes) {
+  // 6 n^2 triangles, the centre plus 6k vertices at radius k R / n on ring k,
+  // counter-clockwise cells.
+  const double R = 0.5;
+  for (int n : kSymmetryRings) {
+    for (int order = 1; order <= 2; ++order) {
+      const DiskMesh m = make_disk_mesh(R, 6 * n * n, order);
+      ASSERT_EQ(disk_mesh_rings(6 * n * n), n);
+      EXPECT_EQ(m.num_cells(), 6 * n * n);
+      std::vector<int> ring_count(n + 1, 0);
+      for (int v = 0; v < m.num_vertices; ++v) {
+        const double k = node_radius(m, v) * n / R;
+        const int ring = static_cast<int>(std::lround(k));
+        ASSERT_NEAR(k, ring, 1e-12) << "vertex " << v << " off the rings";
+        ++ring_count[ring];
+      }
+      EXPECT_EQ(ring_count[0], 1);
+      for (int k = 1; k <= n; ++k) EXPECT_EQ(ring_count[k], 6 * k) << "n " << n << " ring " << k;
+      const int npc = m.nodes_per_cell();
+      for (int c = 0; c < m.num_cells(); ++c) {
+        const int *v = &m.cells[c * npc];
+        const double ax = m.X[2 * v[1]] - m.X[2 * v[0]], ay = m.X[2 * v[1] + 1] - m.X[2 * v[0] + 1];
+        const double bx = m.X[2 * v[2]] - m.X[2 * v[0]], by = m.X[2 * v[2] + 1] - m.X[2 * v[0] + 1];
+        EXPECT_GT(ax * by - ay * bx, 0.0) << "n " << n << " cell " << c;
+      }
+    }
+  }
+}
+
+TEST(DiskMesh, MirrorSymmetricAboutBothAxes) {
+  // The set of triangles (each a set of vertex coordinates; for order 2 also
+  // the set of its six node coordinates) and the set of mid-edge nodes are
+  // invariant under x -> -x and under y -> -y.
+  for (int n : kSymmetryRings) {
+    for (int order = 1; order <= 2; ++order) {
+      const DiskMesh m = make_disk_mesh(0.5, 6 * n * n, order);
+      const int npc = m.nodes_per_cell();
+      for (int mirror = 0; mirror < 2; ++mirror) {
+        const double sx = mirror == 0 ? -1.0 : 1.0, sy = mirror == 0 ? 1.0 : -1.0;
+        std::set<std::vector<Point>> vertex_sets, node_sets, mirrored_vertex_sets, mirrored_node_sets;
+        for (int c = 0; c < m.num_cells(); ++c) {
+          const int *v = &m.cells[c * npc];
+          std::vector<Point> tri, mirrored;
+          for (int a = 0; a < npc; ++a) {
+            tri.push_back(rounded(m, v[a], 1.0, 1.0));
+            mirrored.push_back(rounded(m, v[a], sx, sy));
+            if (a == 2) {
+              vertex_sets.insert(sorted(tri));
+              mirrored_vertex_sets.insert(sorted(mirrored));
+            }
+          }
+          node_sets.insert(sorted(tri));
+          mirrored_node_sets.insert(sorted(mirrored));
+        }
+        EXPECT_EQ(static_cast<int>(vertex_sets.size()), m.num_cells());
+        EXPECT_TRUE(vertex_sets == mirrored_vertex_sets) << "n " << n << " order " << order << " mirror " << mirror;
+        EXPECT_TRUE(node_sets == mirrored_node_sets) << "n " << n << " order " << order << " mirror " << mirror;
+        int unmatched = 0;
+        for (const auto &t : vertex_sets) unmatched += mirrored_vertex_sets.count(t) == 0;
+        EXPECT_EQ(unmatched, 0) << "n " << n << " order " << order << " mirror " << mirror;
+
+        std::set<Point> mids, mirrored_mids;
+        for (int node = m.num_vertices; node < m.num_nodes(); ++node) {
+          mids.insert(rounded(m, node, 1.0, 1.0));
+          mirrored_mids.insert(rounded(m, node, sx, sy));
+        }
+        EXPECT_EQ(static_cast<int>(mids.size()), m.num_nodes() - m.num_vertices);
+        EXPECT_TRUE(mids == mirrored_mids) << "n " << n << " order " << order << " mirror " << mirror;
+
+        // Mirror images are exact: every node's mirrored coordinates are,
+        // bit for bit, the coordinates of a node.
+        std::set<std::pair<double, double>> exact;
+        for (int node = 0; node < m.num_nodes(); ++node) exact.emplace(m.X[2 * node], m.X[2 * node + 1]);
+        for (int node = 0; node < m.num_nodes(); ++node)
+          EXPECT_EQ(exact.count({sx * m.X[2 * node], sy * m.X[2 * node + 1]}), 1u)
+              << "n " << n << " order " << order << " node " << node;
+      }
+    }
   }
 }
 

@@ -7,6 +7,14 @@
 // The outer ring has 6n boundary segments (24 for the paper's ~92-triangle
 // disk).
 //
+// The mesh (vertices, triangulation and order-2 mid-edge nodes) is invariant,
+// as a set of triangles, under the mirrors x -> -x and y -> -y (and the
+// 60-degree rotation); mirror-image nodes have exactly negated coordinates.
+// So the unrotated disk between symmetric walls is a symmetric equilibrium
+// and a rotation gauge carries no reaction torque. Smallest angle: 60 deg
+// (n = 1), 47.6 (n = 2, 3), 47.3 (n = 4), 45.5 (n = 8), 44.8 (n = 13),
+// 44.3 (n = 25), tending to about 43.7 as n grows.
+//
 // Order 2 gives 6-node isoparametric triangles whose boundary mid-edge nodes
 // sit on the circle, so the discrete boundary is a piecewise parabola that
 // represents the disk area to O(h^4) instead of losing ~1 % with 24 straight

@@ -238,6 +238,7 @@ class CompactionProblem {
  private:
   friend PetscErrorCode FormFunction(SNES, Vec, Vec, void *);
   friend PetscErrorCode FormJacobian(SNES, Vec, Mat, Mat, void *);
+  friend PetscErrorCode NewtonMonitor(SNES, PetscInt, PetscReal, void *);
   friend PetscErrorCode ConvergenceTest(SNES, PetscInt, PetscReal, PetscReal, PetscReal, SNESConvergedReason *, void *);
 
   // Kinematics of one candidate at state z, on at most kMaxDofs global unknowns (-1: absent).
@@ -297,7 +298,8 @@ class CompactionProblem {
   std::vector<char> active_now_, active_checked_;
   bool inverted_ = false;
   double fnorm0_ = 0.0;
-  double rho_ = 0.0;             // proximal weight of the current Newton matrix
+  double rho_anchor_ = 0.0;         // pseudo-transient weight (0: plain Newton)
+  std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
   std::vector<PetscScalar> coo_values_;
 };
 
