@@ -689,6 +689,16 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscFunctionReturn(0);
 }
 
+double CompactionProblem::ProximalDiagonal(PetscInt i) const {
+  if (i >= MultiplierOffset()) return -params_.prox_eta;
+  if (i >= GaugeOffset()) return 0.0;
+  double weight = 1.0;
+  if (Frictional())
+    for (const RigidBody &r : rigid_)
+      if (i == r.dof_offset + 2) weight = r.radius * r.radius;
+  return (params_.prox_eta * params_.young + rho_anchor_) * weight;
+}
+
 PetscErrorCode CompactionProblem::EvaluateResidual(Vec z, Vec F) {
   PetscFunctionBeginUser;
   PetscCall(FormFunction(nullptr, z, F, this));

@@ -232,6 +232,9 @@ class CompactionProblem {
   const std::vector<ContactCandidate> &Candidates() const { return candidates_; }
   const std::vector<double> &Multipliers() const { return lambda_; }
   const std::vector<double> &TangentialMultipliers() const { return lambda_t_; }
+  // What the Newton matrix adds to the true Jacobian on diagonal entry i:
+  // rho (r^2 rho on rigid rotations) on body and wall unknowns, -prox_eta on multipliers.
+  double ProximalDiagonal(PetscInt i) const;
   // Contact states (0 open, 1 closed/stick, 2 sliding) at the last residual evaluation.
   const std::vector<char> &ActiveSet() const { return active_now_; }
 

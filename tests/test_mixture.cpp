@@ -1,0 +1,228 @@
+// Mixture scenes with analytic answers: rigid and deformable disks, every pair
+// type, with and without Coulomb friction.
+//
+//  1. An n x n square arrangement of equal rigid disks of diameter d in the
+//     box: phi = pi/4 at every pressure and a force P d at every contact
+//     (each row of n disks carries the wall force P n d), with and without
+//     friction.
+//  2. Checkerboard mixtures of rigid and deformable disks: converged states
+//     satisfy Signorini (no penetration, lambda_n >= 0, lambda_n g = 0) and
+//     Coulomb (|lambda_t| <= mu lambda_n), and the contact stress equals the
+//     imposed pressure (virial identity), at several pressures.
+//  3. The Jacobian of a frictional mixture (rigid-rigid, rigid-node,
+//     node-segment, walls) against central finite differences of the residual.
+//  4. Kernel: the Coulomb NCP function's stick, slip and open branches.
+#include <gtest/gtest.h>
+#include <petscsnes.h>
+
+#include <cmath>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "deformix/contact_law.hpp"
+#include "deformix/load_controller.hpp"
+#include "deformix/observables.hpp"
+#include "deformix/problem.hpp"
+
+using namespace deformix;
+
+namespace {
+
+#define ASSERT_PETSC(call) ASSERT_EQ(static_cast<int>(call), 0) << #call
+
+// n x n disks of diameter 1 on a unit square grid; pattern(i, j) says which are deformable.
+template <class Pattern>
+std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern deformable) {
+  ProblemParameters p;
+  p.friction = friction;
+  p.constrain_rotation = PETSC_FALSE;
+  auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
+  if (problem->SetParameters(p)) return nullptr;
+  const DiskMesh mesh = make_disk_mesh(0.5, 92, 2);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      if (deformable(i, j)) problem->AddDeformableBody(mesh, i + 0.5, j + 0.5);
+      else problem->AddRigidBody(i + 0.5, j + 0.5, 0.5);
+    }
+  const double w[4] = {0.0, double(n), 0.0, double(n)};
+  problem->SetWalls(w);
+  return problem;
+}
+
+void CheckSignoriniCoulomb(const CompactionProblem &problem, double P, const char *label) {
+  const double mu = problem.Parameters().friction;
+  const std::vector<ContactForce> forces = problem.ContactForces();
+  for (const ContactForce &f : forces) {
+    EXPECT_GE(f.gap, -1e-10) << label << ": penetration";
+    EXPECT_GE(f.normal_multiplier, -1e-10 * P) << label << ": tensile contact force";
+    // At convergence c_n g <= atol for closed contacts: |lambda g| is roundoff times P.
+    EXPECT_LE(std::abs(f.normal_multiplier * f.gap), 1e-10 * P) << label << ": complementarity";
+    EXPECT_LE(std::abs(f.tangential_multiplier), mu * f.normal_multiplier + 1e-10 * P) << label << ": Coulomb cone";
+  }
+  const PackingObservables o = ComputeObservables(problem);
+  EXPECT_NEAR(o.mean_stress, P, 1e-8 * P) << label << ": contact stress vs imposed pressure";
+}
+
+TEST(Mixture, RigidSquareLatticeCarriesPdAtEveryContact) {
+  for (double friction : {0.0, 0.3}) {
+    auto problem = Lattice(3, friction, [](int, int) { return false; });
+    ASSERT_TRUE(problem);
+    LoadControlParameters load;
+    double step = -1.0;
+    for (double P : {1e-4, 1e-2, 0.1}) {
+      LevelReport rep;
+      ASSERT_PETSC(AdvanceToPressure(*problem, load, P, &step, &rep));
+      const StateSummary s = problem->Summary();
+      EXPECT_NEAR(s.packing_fraction, M_PI / 4, 1e-10) << "friction " << friction;
+      int n_pair = 0;
+      for (const ContactForce &f : problem->ContactForces()) {
+        if (f.normal_multiplier <= 0.0) continue;
+        // Rows and columns of equal disks: the force P x d (d = 1) everywhere.
+        EXPECT_NEAR(f.normal_multiplier, P, 1e-5 * P) << "friction " << friction;
+        EXPECT_NEAR(f.tangential_multiplier, 0.0, 1e-5 * P);
+        n_pair += f.master_particle >= 0;
+      }
+      EXPECT_EQ(n_pair, 12);  // 2 n (n - 1) for n = 3
+      CheckSignoriniCoulomb(*problem, P, "rigid lattice");
+    }
+  }
+}
+
+TEST(Mixture, CheckerboardSatisfiesSignoriniCoulombAndVirial) {
+  for (double friction : {0.0, 0.5}) {
+    auto problem = Lattice(2, friction, [](int i, int j) { return (i + j) % 2 == 0; });
+    ASSERT_TRUE(problem);
+    LoadControlParameters load;
+    double step = -1.0, phi_prev = M_PI / 4;
+    for (double P : {1e-3, 0.01, 0.05}) {
+      LevelReport rep;
+      ASSERT_PETSC(AdvanceToPressure(*problem, load, P, &step, &rep));
+      const StateSummary s = problem->Summary();
+      EXPECT_GT(s.packing_fraction, phi_prev) << "phi rises with P";
+      EXPECT_GT(s.min_cell_area_ratio, 0.0);
+      phi_prev = s.packing_fraction;
+      CheckSignoriniCoulomb(*problem, P, friction > 0 ? "checkerboard, friction" : "checkerboard");
+    }
+  }
+}
+
+TEST(Mixture, AllDeformableLatticeUsesNodeSegmentContacts) {
+  auto problem = Lattice(2, 0.0, [](int, int) { return true; });
+  ASSERT_TRUE(problem);
+  LoadControlParameters load;
+  double step = -1.0;
+  LevelReport rep;
+  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.02, &step, &rep));
+  int node_segment = 0;
+  for (const ContactForce &f : problem->ContactForces()) node_segment += f.type == ContactType::NodeSegment && f.normal_multiplier > 0;
+  EXPECT_GT(node_segment, 0);
+  CheckSignoriniCoulomb(*problem, 0.02, "deformable lattice");
+}
+
+// Jacobian of a frictional checkerboard (every pair type) vs central differences.
+TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
+  auto problem = Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; });
+  ASSERT_TRUE(problem);
+  LoadControlParameters load;
+  double step = -1.0;
+  LevelReport rep;
+  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.02, &step, &rep));
+  // Open a new load step so that the slip is measured from the converged state.
+  problem->MarkStepStart();
+  Vec z, F, Fp, Fm;
+  ASSERT_PETSC(problem->CreateGlobalVector(&z));
+  ASSERT_PETSC(problem->PackState(z));
+  PetscInt n;
+  ASSERT_PETSC(VecGetSize(z, &n));
+  // A small random perturbation of every unknown (multipliers included).
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  PetscScalar *za;
+  ASSERT_PETSC(VecGetArray(z, &za));
+  for (PetscInt i = 0; i < n; ++i) za[i] += 1e-6 * U(rng);
+  ASSERT_PETSC(VecRestoreArray(z, &za));
+  ASSERT_PETSC(VecDuplicate(z, &F));
+  ASSERT_PETSC(VecDuplicate(z, &Fp));
+  ASSERT_PETSC(VecDuplicate(z, &Fm));
+  ASSERT_PETSC(problem->EvaluateResidual(z, F));
+  const std::vector<char> branches = problem->ActiveSet();
+  Mat J;
+  ASSERT_PETSC(problem->EvaluateJacobian(z, &J));
+  const double h = 1e-9;
+  double worst = 0.0, scale = 0.0;
+  int skipped = 0;
+  for (PetscInt j = 0; j < n; ++j) {
+    ASSERT_PETSC(VecSetValue(z, j, h, ADD_VALUES));
+    ASSERT_PETSC(VecAssemblyBegin(z));
+    ASSERT_PETSC(VecAssemblyEnd(z));
+    ASSERT_PETSC(problem->EvaluateResidual(z, Fp));
+    const bool same_p = problem->ActiveSet() == branches;
+    ASSERT_PETSC(VecSetValue(z, j, -2 * h, ADD_VALUES));
+    ASSERT_PETSC(VecAssemblyBegin(z));
+    ASSERT_PETSC(VecAssemblyEnd(z));
+    ASSERT_PETSC(problem->EvaluateResidual(z, Fm));
+    const bool same_m = problem->ActiveSet() == branches;
+    ASSERT_PETSC(VecSetValue(z, j, h, ADD_VALUES));
+    ASSERT_PETSC(VecAssemblyBegin(z));
+    ASSERT_PETSC(VecAssemblyEnd(z));
+    if (!same_p || !same_m) {  // a contact switched branch inside the difference
+      ++skipped;
+      continue;
+    }
+    const PetscScalar *fp, *fm;
+    ASSERT_PETSC(VecGetArrayRead(Fp, &fp));
+    ASSERT_PETSC(VecGetArrayRead(Fm, &fm));
+    for (PetscInt i = 0; i < n; ++i) {
+      PetscScalar Jij;
+      ASSERT_PETSC(MatGetValues(J, 1, &i, 1, &j, &Jij));
+      // The proximal terms are on the Newton matrix only.
+      const double fd = (fp[i] - fm[i]) / (2 * h);
+      const double prox = (i == j) ? problem->ProximalDiagonal(i) : 0.0;
+      worst = std::max(worst, std::abs(Jij - prox - fd));
+      scale = std::max(scale, std::abs(fd));
+    }
+    ASSERT_PETSC(VecRestoreArrayRead(Fp, &fp));
+    ASSERT_PETSC(VecRestoreArrayRead(Fm, &fm));
+  }
+  std::printf("frictional mixture: %" PetscInt_FMT " unknowns, worst |J - FD| = %.2e (scale %.2e), %d columns skipped\n",
+              n, worst, scale, skipped);
+  EXPECT_LT(worst, 1e-5 * scale);
+  EXPECT_LT(skipped, n / 10);
+  MatDestroy(&J);
+  VecDestroy(&z);
+  VecDestroy(&F);
+  VecDestroy(&Fp);
+  VecDestroy(&Fm);
+}
+
+TEST(CoulombLaw, StickSlipAndOpenBranches) {
+  const double mu = 0.3, c = 2.0;
+  // Closed contact (lambda_n - c g = 1 > 0), trial force inside the cone: stick, C = c s.
+  TangentialNcp stick = coulomb_ncp(0.1, 1.0, 0.0, 0.01, mu, c, c);
+  EXPECT_EQ(stick.state, kClosed);
+  EXPECT_DOUBLE_EQ(stick.value, c * 0.01);
+  EXPECT_DOUBLE_EQ(stick.d_slip, c);
+  // Trial force beyond mu lambda_n: slip with lambda_t = -mu lambda_n sign(s) at the root.
+  TangentialNcp slip = coulomb_ncp(-0.3, 1.0, 0.0, 0.5, mu, c, c);
+  EXPECT_EQ(slip.state, kSliding);
+  EXPECT_NEAR(slip.value, 0.0, 1e-15);  // lambda_t = -mu lambda_n solves it
+  EXPECT_DOUBLE_EQ(slip.d_lambda_n, mu);
+  // Below mu lambda_n the same slip would be a stick residual, above it slip.
+  EXPECT_EQ(coulomb_ncp(0.29, 1.0, 0.0, 0.0, mu, c, c).state, kClosed);
+  EXPECT_EQ(coulomb_ncp(0.31, 1.0, 0.0, 0.0, mu, c, c).state, kSliding);
+  // Open contact: lambda_t = 0.
+  TangentialNcp open = coulomb_ncp(0.2, 0.0, 0.1, 0.3, mu, c, c);
+  EXPECT_EQ(open.state, kOpen);
+  EXPECT_DOUBLE_EQ(open.value, 0.2);
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  if (PetscInitialize(&argc, &argv, nullptr, nullptr)) return 1;
+  const int result = RUN_ALL_TESTS();
+  PetscFinalize();
+  return result;
+}
