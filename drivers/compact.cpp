@@ -89,6 +89,12 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscFunctionBeginUser;
   // 1. Options: everything is validated before anything is written.
   params.constrain_rotation = PETSC_FALSE;  // deformable disks rotate freely in a packing
+  // Packings have floppy modes (rattlers, free rotations, sliding before the
+  // network closes): pseudo-transient continuation with full Newton steps.
+  params.prox_initial = 10.0;
+  PetscBool has_ls = PETSC_FALSE;
+  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-snes_linesearch_type", &has_ls));
+  if (!has_ls) PetscCall(PetscOptionsSetValue(nullptr, "-snes_linesearch_type", "basic"));
   PetscCall(ProcessOptions(comm, &opts));
   PetscCall(params.SetFromOptions(comm));
   PetscCall(load.SetFromOptions(comm));

@@ -741,7 +741,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   const double rho_floor = params_.prox_eta * params_.young, rho_ceiling = 1e3 * params_.young;
   rho_anchor_ = params_.prox_initial * pressure;
   double rho_last = rho_anchor_;
-  const int max_outer = 60;
+  const int max_outer = 300;
   for (int outer = 0, refresh = 0;; ++outer) {
     if (!snes_) PetscCall(SetUpLayout());
     anchor_.assign(u_.begin(), u_.end());
@@ -801,7 +801,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     report->residual = true_norm;
     if (true_norm <= atol && active_now_ == active_inner) break;
     PetscCheck(outer < max_outer, comm_, PETSC_ERR_NOT_CONVERGED, "pseudo-transient continuation did not settle");
-    rho_anchor_ = its <= 4 ? 0.1 * rho_used : rho_used;
+    rho_anchor_ = its <= 6 ? rho_used / 3.0 : rho_used;
     if (rho_anchor_ < rho_floor) rho_anchor_ = rho_floor;
     rho_last = rho_anchor_;
   }
