@@ -800,7 +800,13 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     PetscCall(VecNorm(r_, NORM_2, &true_norm));
     report->residual = true_norm;
     if (true_norm <= atol && active_now_ == active_inner) break;
-    PetscCheck(outer < max_outer, comm_, PETSC_ERR_NOT_CONVERGED, "pseudo-transient continuation did not settle");
+    if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step
+      report->reason = SNES_DIVERGED_MAX_IT;
+      RestoreState(saved);
+      pressure_ = saved_pressure;
+      u_start_ = u_;
+      PetscFunctionReturn(0);
+    }
     rho_anchor_ = its <= 6 ? rho_used / 3.0 : rho_used;
     if (rho_anchor_ < rho_floor) rho_anchor_ = rho_floor;
     rho_last = rho_anchor_;
