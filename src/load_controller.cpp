@@ -1,5 +1,6 @@
 #include "deformix/load_controller.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace deformix {
@@ -43,7 +44,8 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
       P = Pnext;
       ++report->substeps;
       cuts_in_a_row = 0;
-      if (solve.newton_its <= params.easy_its) dP = inc * params.growth;
+      // Easy: few Newton iterations per inner solve (pseudo-transient steps count separately).
+      if (solve.newton_its <= params.easy_its * std::max(1, solve.inner_solves)) dP = inc * params.growth;
       else dP = inc;
     } else {
       ++report->cuts;

@@ -722,10 +722,21 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   u_start_ = u_;
   // Secant predictor along the load path: extrapolate the bodies and walls
   // from the last two converged states (none for the first increment).
+  // The extrapolation is halved while it would make bodies overlap by more
+  // than 1e-3 <d> or invert an element: the first Newton step has to close
+  // every predicted overlap at once, whatever the damping.
   if (params_.secant_predictor && have_previous_ && pressure_ != previous_pressure_) {
-    const double t = (pressure - pressure_) / (pressure_ - previous_pressure_);
-    for (size_t i = 0; i < u_.size(); ++i) u_[i] += t * (u_[i] - previous_.u[i]);
-    for (int k = 0; k < 4; ++k) w_[k] += t * (w_[k] - previous_.w[k]);
+    double t = (pressure - pressure_) / (pressure_ - previous_pressure_);
+    for (int attempt = 0; attempt < 5; ++attempt, t *= 0.5) {
+      for (size_t i = 0; i < u_.size(); ++i) u_[i] = saved.u[i] + t * (saved.u[i] - previous_.u[i]);
+      for (int k = 0; k < 4; ++k) w_[k] = saved.w[k] + t * (saved.w[k] - previous_.w[k]);
+      const StateSummary predicted = Summary();
+      if (predicted.min_cell_area_ratio > 0.0 &&
+          predicted.max_penetration < 1e-3 * mean_diameter_ &&
+          DetectCandidates(-1e-3).empty())
+        break;
+      if (attempt == 4) u_ = saved.u, std::copy(saved.w, saved.w + 4, w_);
+    }
   }
   pressure_ = pressure;
   PetscCall(RefreshCandidates());
@@ -749,6 +760,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     PetscCall(PackState(z_));
     active_checked_.clear();
     PetscCall(SNESSolve(snes_, nullptr, z_));
+    ++report->inner_solves;
     PetscInt its;
     PetscReal atol, rtol, stol;
     PetscInt maxit, maxf;

@@ -37,6 +37,7 @@ std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern defor
   ProblemParameters p;
   p.friction = friction;
   p.constrain_rotation = PETSC_FALSE;
+  p.prox_initial = 10.0;  // as the compact driver: pseudo-transient continuation
   auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
   if (problem->SetParameters(p)) return nullptr;
   const DiskMesh mesh = make_disk_mesh(0.5, 92, 2);
@@ -222,6 +223,8 @@ TEST(CoulombLaw, StickSlipAndOpenBranches) {
 int main(int argc, char **argv) {
   ::testing::InitGoogleTest(&argc, argv);
   if (PetscInitialize(&argc, &argv, nullptr, nullptr)) return 1;
+  // The compact driver's Newton settings: full steps, damping by the pseudo-transient term.
+  PetscOptionsSetValue(nullptr, "-snes_linesearch_type", "basic");
   const int result = RUN_ALL_TESTS();
   PetscFinalize();
   return result;

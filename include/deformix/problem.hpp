@@ -147,6 +147,7 @@ struct SolveReport {
   double residual = 0.0;
   int active_contacts = 0;
   int candidate_refreshes = 0;  // re-solves because a non-candidate penetrated or a node changed segment
+  int inner_solves = 0;         // SNES solves (pseudo-transient steps and re-solves included)
 };
 
 // Observables of the current state.
