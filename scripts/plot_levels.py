@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Draw the deformed disks of chosen levels of a deformix levels.h5 file.
 
-Each cell is drawn as its curved (for 6-node cells) outline, coloured by
-its volumetric strain J - 1; the walls are drawn as the box.
+Like the paper's Fig. Snap-shots: rigid disks grey, each cell of a deformable
+disk drawn as its curved (for 6-node cells) outline and coloured by its
+volumetric strain J - 1; the walls are drawn as the box.
 
 usage: plot_levels.py levels.h5 out.png [level ...]   (default: last level)
 """
@@ -48,13 +49,17 @@ def main():
             strain += list(g[body]["cell_area_ratio"][:] - 1.0)
         pc = PolyCollection(polys, array=np.array(strain), cmap="viridis", edgecolors="k", linewidths=0.2)
         ax.add_collection(pc)
+        if "rigid" in g:
+            for x, y, r, _ in g["rigid"][:]:
+                ax.add_patch(plt.Circle((x, y), r, facecolor="0.6", edgecolor="k", linewidth=0.3))
         w = g["walls"][:]
         ax.plot([w[0], w[1], w[1], w[0], w[0]], [w[2], w[2], w[3], w[3], w[2]], "k-", lw=1.5)
         ax.set_aspect("equal")
         ax.set_xlim(w[0] - 0.05, w[1] + 0.05)
         ax.set_ylim(w[2] - 0.05, w[3] + 0.05)
         ax.set_title("P/E = %g, phi = %.4f" % (g.attrs["P_over_E"], g.attrs["packing_fraction"]))
-        fig.colorbar(pc, ax=ax, shrink=0.7, label="J - 1")
+        if strain:
+            fig.colorbar(pc, ax=ax, shrink=0.7, label="J - 1")
     fig.tight_layout()
     fig.savefig(sys.argv[2], dpi=120)
 
