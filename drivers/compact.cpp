@@ -5,7 +5,8 @@ static const char help[] =
     "Protocol: n_particles rigid disks (diameters in [0.8, 1.2], uniform area fraction per diameter)\n"
     "are packed to the frictionless jammed state phi_0 (soft-disk FIRE compression to vanishing\n"
     "overlap); a fraction kappa of the particle area is turned deformable, homogeneously in space;\n"
-    "friction is switched on; then each level of -pressures (P/E) is reached quasistatically with\n"
+    "the first level settles it into exact contact without friction, then friction is switched on\n"
+    "(-settle_frictionless); each level of -pressures (P/E) is reached quasistatically with\n"
     "automatic sub-stepping, each level being exact equilibrium of\n"
     "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
     "solved by semismooth Newton in one PETSc SNES (MUMPS LU).\n\n"
@@ -44,6 +45,7 @@ struct CompactOptions {
   std::vector<double> pressures;
   std::string output_dir;
   PetscBool write_hdf5 = PETSC_TRUE;
+  PetscBool settle_frictionless = PETSC_TRUE;
 };
 
 PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
@@ -58,6 +60,9 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
                             o->mesh_triangles, &o->mesh_triangles, nullptr));
   PetscCall(PetscOptionsBool("-write_hdf5", "write the state of every level to levels.h5", "", o->write_hdf5,
                              &o->write_hdf5, nullptr));
+  PetscCall(PetscOptionsBool("-settle_frictionless",
+                             "solve the first pressure level without friction (friction on from the second level)", "",
+                             o->settle_frictionless, &o->settle_frictionless, nullptr));
   PetscOptionsEnd();
   PetscCheck(o->n_particles >= 1 && o->n_particles <= 200000, comm, PETSC_ERR_USER_INPUT,
              "-n_particles %" PetscInt_FMT ": give between 1 and 200000 particles", o->n_particles);
@@ -158,6 +163,10 @@ PetscErrorCode Run(MPI_Comm comm) {
     const double P_over_E = opts.pressures[level], P = P_over_E * params.young;
     LevelReport rep;
     PetscCall(PetscLogStagePush(stage_solve));
+    // Protocol: the first level settles the soft-jammed packing into exact
+    // contact without friction (as it was assembled); friction acts from the
+    // second level on.
+    problem.SetFrictionActive(level > 0 || !opts.settle_frictionless);
     PetscCall(AdvanceToPressure(problem, load, P, &step, &rep));
     PetscCall(PetscLogStagePop());
     const PackingObservables o = ComputeObservables(problem);

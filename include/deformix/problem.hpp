@@ -227,6 +227,10 @@ class CompactionProblem {
   PetscErrorCode EvaluateResidual(Vec z, Vec F);
   PetscErrorCode EvaluateJacobian(Vec z, Mat *J);  // J is created and owned by the caller
   void SetPressure(double P) { pressure_ = P; }
+  // Switches the Coulomb coefficient between 0 and its value without changing
+  // the unknowns (the protocol: settle the packing frictionless, then turn
+  // friction on).
+  void SetFrictionActive(bool on) { friction_on_ = on; }
   // Makes the current state the start of the load step (reference of the incremental slip).
   void MarkStepStart() { u_start_ = u_; }
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
@@ -289,6 +293,7 @@ class CompactionProblem {
   double previous_pressure_ = 0.0;
   bool have_previous_ = false;
   double mean_diameter_ = 1.0;
+  bool friction_on_ = true;
   std::vector<ContactCandidate> candidates_;
   std::vector<double> lambda_, lambda_t_;
   std::vector<PetscInt> tangential_index_;  // per candidate: its lambda_t unknown, or -1
