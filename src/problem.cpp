@@ -671,7 +671,11 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscCall(SNESSetJacobian(snes_, J_, J_, FormJacobian, this));
   PetscCall(SNESSetConvergenceTest(snes_, ConvergenceTest, this, nullptr));
   // Forces are per unit thickness, in units of E * d; the tolerance is absolute in those units.
-  PetscCall(SNESSetTolerances(snes_, 1e-11 * params_.young * mean_diameter_, 1e-30, 0.0, 50, -1));
+  // With pseudo-transient continuation a stalled inner solve (active-set or
+  // slip-direction cycling) is better cut short: the outer loop then retries
+  // with ten times the damping.
+  const PetscInt max_it = params_.prox_initial > 0.0 ? 15 : 50;
+  PetscCall(SNESSetTolerances(snes_, 1e-11 * params_.young * mean_diameter_, 1e-30, 0.0, max_it, -1));
   SNESLineSearch ls;
   PetscCall(SNESGetLineSearch(snes_, &ls));
   PetscCall(SNESLineSearchSetType(ls, SNESLINESEARCHBT));
