@@ -148,13 +148,4 @@ PetscErrorCode Run(MPI_Comm comm) {
 
 }  // namespace
 
-int main(int argc, char **argv) {
-  PetscCall(PetscInitialize(&argc, &argv, nullptr, help));
-  PetscErrorCode ierr = Run(PETSC_COMM_WORLD);
-  if (ierr) {
-    PetscFinalize();
-    return 1;
-  }
-  PetscCall(PetscFinalize());
-  return 0;
-}
+int main(int argc, char **argv) { return RunDriver(argc, argv, help, Run); }

@@ -116,6 +116,13 @@ PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   PetscFunctionReturn(0);
 }
 
+int RunDriver(int argc, char **argv, const char *help, PetscErrorCode (*run)(MPI_Comm)) {
+  if (PetscInitialize(&argc, &argv, nullptr, help)) return 1;
+  const PetscErrorCode ierr = run(PETSC_COMM_WORLD);
+  const PetscErrorCode fin = PetscFinalize();
+  return (ierr || fin) ? 1 : 0;
+}
+
 bool HelpRequested() {
   PetscBool help = PETSC_FALSE;
   PetscOptionsHasHelp(nullptr, &help);

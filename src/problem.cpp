@@ -438,9 +438,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   // rho_a D (z - z_a) on both the residual and the matrix (pseudo-transient
   // continuation towards equilibrium, see Solve).
   if (need_K || (F && rho_anchor_ > 0.0)) {
-    std::vector<double> weight(rot_off, 1.0);
-    if (Frictional())
-      for (const RigidBody &r : rigid_) weight[r.dof_offset + 2] = r.radius * r.radius;
+    const std::vector<double> &weight = prox_weight_;
     const double rho = params_.prox_eta * params_.young;
     if (F && rho_anchor_ > 0.0)
       for (PetscInt i = 0; i < rot_off; ++i) F[i] += rho_anchor_ * weight[i] * (z[i] - anchor_[i]);
@@ -547,7 +545,7 @@ PetscErrorCode FormFunction(SNES snes, Vec z, Vec F, void *ctx) {
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode FormJacobian(SNES snes, Vec z, Mat J, Mat, void *ctx) {
+PetscErrorCode FormJacobian(SNES, Vec z, Mat J, Mat, void *ctx) {
   auto *p = static_cast<CompactionProblem *>(ctx);
   const PetscScalar *za;
   PetscFunctionBeginUser;
@@ -650,6 +648,10 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   for (size_t c = 0; c < candidates_.size(); ++c)
     if (HasTangential(candidates_[c])) tangential_index_[c] = next++;
   if (u_start_.size() != u_.size()) u_start_ = u_;
+  // Weights D of the proximal terms: 1, and r^2 on rigid rotations (angles).
+  prox_weight_.assign(GaugeOffset(), 1.0);
+  if (Frictional())
+    for (const RigidBody &r : rigid_) prox_weight_[r.dof_offset + 2] = r.radius * r.radius;
   n_total_ = next;
   const PetscInt n_local = rank_ == 0 ? n_total_ : 0;
   PetscCall(VecCreateMPI(comm_, n_local, n_total_, &z_));
@@ -696,11 +698,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
 double CompactionProblem::ProximalDiagonal(PetscInt i) const {
   if (i >= MultiplierOffset()) return -params_.prox_eta;
   if (i >= GaugeOffset()) return 0.0;
-  double weight = 1.0;
-  if (Frictional())
-    for (const RigidBody &r : rigid_)
-      if (i == r.dof_offset + 2) weight = r.radius * r.radius;
-  return (params_.prox_eta * params_.young + rho_anchor_) * weight;
+  return (params_.prox_eta * params_.young + rho_anchor_) * prox_weight_[i];
 }
 
 PetscErrorCode CompactionProblem::EvaluateResidual(Vec z, Vec F) {

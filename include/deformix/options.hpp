@@ -25,6 +25,10 @@ PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir);
 // -pc_*, -mat_*, ...) are read later and pass by their prefix.
 PetscErrorCode CheckUnknownOptions(MPI_Comm comm);
 
+// The common main() of the drivers: PetscInitialize, run, PetscFinalize; any
+// error (already printed by PETSc) becomes exit code 1.
+int RunDriver(int argc, char **argv, const char *help, PetscErrorCode (*run)(MPI_Comm));
+
 // True when -help was given: drivers print their options and stop before running.
 bool HelpRequested();
 

@@ -309,6 +309,7 @@ class CompactionProblem {
   double fnorm0_ = 0.0;
   double rho_anchor_ = 0.0;         // pseudo-transient weight (0: plain Newton)
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
+  std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
   std::vector<PetscScalar> coo_values_;
 };
 
