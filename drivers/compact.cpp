@@ -96,7 +96,8 @@ PetscErrorCode Run(MPI_Comm comm) {
   params.constrain_rotation = PETSC_FALSE;  // deformable disks rotate freely in a packing
   // Packings have floppy modes (rattlers, free rotations, sliding before the
   // network closes): pseudo-transient continuation with full Newton steps.
-  params.prox_initial = 10.0;
+  params.ptc_move = 0.02;
+  params.newton_max_move = 0.05;
   PetscBool has_ls = PETSC_FALSE;
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-snes_linesearch_type", &has_ls));
   if (!has_ls) PetscCall(PetscOptionsSetValue(nullptr, "-snes_linesearch_type", "basic"));
@@ -142,17 +143,21 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(PetscPrintf(comm,
                         "compact: %d particles (%d deformable, %d triangles each; %d rigid), kappa = %g, friction = %g,"
                         " E = %g, nu = %g, seed %d\n"
-                        "  jammed rigid packing (frictionless): phi_0 = %.4f, Z_0 (no rattlers) = %.3f, rattlers %.1f %%\n",
+                        "  jammed rigid packing (frictionless): phi_0 = %.4f, Z_0 without rattlers = %.3f between particles"
+                        " (%.3f with wall contacts counted twice), rattlers %.1f %%\n",
                         packing.size(), n_deformable, unit_mesh.num_cells(), packing.size() - n_deformable,
                         (double)opts.kappa, params.friction, params.young, params.poisson, (int)opts.seed,
-                        packing_fraction(packing), z0.z_mirror, 100.0 * z0.rattler_fraction));
+                        packing_fraction(packing), z0.non_rattlers ? 2.0 * z0.pair_contacts / z0.non_rattlers : 0.0, z0.z_mirror,
+                        100.0 * z0.rattler_fraction));
 
   // 3. Levels: solve, measure, write.
   CsvWriter curve;
   PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv",
                        {"P_over_E", "phi", "Z", "Z_no_rattlers", "rattlers", "sigma_xx_over_E", "sigma_xy_over_E",
                         "sigma_yy_over_E", "P_sigma_over_E", "K_over_E", "mean_volumetric_strain", "contacts",
-                        "sliding_contacts", "newton_its", "substeps", "cuts", "seconds", "max_penetration"}));
+                        "sliding_contacts", "newton_its", "substeps", "cuts", "seconds", "max_penetration", "pseudo_time_steps",
+                        "symbolic_factorizations", "unknowns", "rigid_unknowns", "deformable_unknowns",
+                        "tangential_unknowns", "candidates", "jacobian_nonzeros"}));
   const std::string h5 = opts.output_dir + "/levels.h5";
   // Results of an earlier run in this directory must not mix with this one.
   PetscCall(RemoveFile(comm, h5));
@@ -170,10 +175,19 @@ PetscErrorCode Run(MPI_Comm comm) {
     PetscCall(AdvanceToPressure(problem, load, P, &step, &rep));
     PetscCall(PetscLogStagePop());
     const PackingObservables o = ComputeObservables(problem);
+    const LayoutSizes sizes = problem.Sizes();
+    if (level == 0)
+      PetscCall(PetscPrintf(comm,
+                            "  unknowns: %" PetscInt_FMT " (deformable %" PetscInt_FMT ", rigid %" PetscInt_FMT
+                            ", walls 4, gauges %" PetscInt_FMT ", contact candidates %" PetscInt_FMT ", tangential %" PetscInt_FMT
+                            "), Jacobian nonzeros %" PetscInt_FMT "\n",
+                            sizes.total, sizes.deformable, sizes.rigid, sizes.gauges, sizes.normal, sizes.tangential,
+                            sizes.jacobian_nonzeros));
     // Bulk modulus K = dP/dphi * dphi/deps_v = phi dP/dphi (eps_v = -ln(phi_0/phi)), by
     // finite differences between successive levels.
     const double dphi = o.packing_fraction - prev_phi;
-    const double K = dphi != 0.0 ? 0.5 * (o.packing_fraction + prev_phi) * (P - prev_P) / dphi : INFINITY;
+    // A rigid packing does not compress: K is infinite (phi changes at roundoff level only).
+    const double K = std::abs(dphi) > 1e-10 * o.packing_fraction ? 0.5 * (o.packing_fraction + prev_phi) * (P - prev_P) / dphi : INFINITY;
     prev_phi = o.packing_fraction, prev_P = P;
     PetscCall(PetscPrintf(comm, "  %9.3g %8.5f %6.3f %6.3f %10.7f %8.3g %7d %6" PetscInt_FMT " %6d %8.2f\n", P_over_E,
                           o.packing_fraction, o.coordination, o.coordination_no_rattlers,
@@ -185,7 +199,9 @@ PetscErrorCode Run(MPI_Comm comm) {
                          o.stress[0] / E, o.stress[1] / E, o.stress[3] / E, o.mean_stress / E, K / E,
                          o.mean_volumetric_strain, double(o.contacts), double(o.sliding_contacts),
                          double(rep.newton_its), double(rep.substeps), double(rep.cuts), rep.seconds,
-                         o.max_penetration}));
+                         o.max_penetration, double(rep.inner_solves), double(rep.layouts), double(sizes.total),
+                         double(sizes.rigid), double(sizes.deformable), double(sizes.tangential),
+                         double(sizes.normal), double(sizes.jacobian_nonzeros)}));
     if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
     PetscCall(PetscLogStagePop());
   }

@@ -30,7 +30,7 @@ struct Bound {
 
 // Closest boundary segment of a counter-clockwise boundary polygon to p, and
 // the signed gap to it (outward normal = right normal of a -> b).
-void ClosestSegment(const std::vector<double> &xb, const double p[2], int *segment, double *gap) {
+void ClosestSegment(const std::vector<double> &xb, const double p[2], int *segment, double *gap, double *xi_out) {
   const int nb = static_cast<int>(xb.size() / 2);
   double best = std::numeric_limits<double>::infinity();
   for (int s = 0; s < nb; ++s) {
@@ -42,6 +42,7 @@ void ClosestSegment(const std::vector<double> &xb, const double p[2], int *segme
     if (dist < best) {
       best = dist;
       *segment = s;
+      *xi_out = xi;
       const double l = std::sqrt(l2);
       *gap = ((p[0] - a[0]) * ey - (p[1] - a[1]) * ex) / l;
     }
@@ -159,13 +160,15 @@ std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin)
               const double *p = &xs[2 * k];
               if (std::hypot(p[0] - A.x, p[1] - A.y) - A.r >= reach) continue;
               int segment = -1;
-              double gap = 0.0;
-              ClosestSegment(xm, p, &segment, &gap);
+              double gap = 0.0, xi = 0.0;
+              ClosestSegment(xm, p, &segment, &gap, &xi);
               // A node deeper than half the master's radius is on the far side: not this pair.
               if (gap < reach && gap > -0.5 * A.r) {
                 ContactCandidate cc;
                 cc.type = ContactType::NodeSegment, cc.master = A.index, cc.body = B.index, cc.point = k;
-                cc.segment = segment;
+                // The pair's window: the two master segments around the
+                // master boundary node nearest to the closest point.
+                cc.segment = (segment + (xi < 0.5 ? 0 : 1)) % static_cast<int>(xm.size() / 2);
                 out.push_back(cc);
               }
             }

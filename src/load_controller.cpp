@@ -40,6 +40,8 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
     SolveReport solve;
     PetscCall(problem.Solve(Pnext, &solve));
     report->newton_its += solve.newton_its;
+    report->inner_solves += solve.inner_solves;
+    report->layouts += solve.layouts;
     if (solve.converged) {
       P = Pnext;
       ++report->substeps;

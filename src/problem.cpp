@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <set>
+#include <string>
 #include <tuple>
 
 namespace deformix {
@@ -48,14 +50,17 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              ncp_scale, &ncp_scale, nullptr));
   PetscCall(PetscOptionsReal("-prox_eta", "proximal regularization of the Newton step, rho / E (vanishes at equilibrium)",
                              "", prox_eta, &prox_eta, nullptr));
-  PetscCall(PetscOptionsReal("-prox_initial",
-                             "proximal weight at the first Newton iterate of a solve, rho_0 / P; it then falls with the residual",
-                             "", prox_initial, &prox_initial, nullptr));
+  PetscCall(PetscOptionsReal("-ptc_move",
+                             "pseudo-transient continuation: largest move of a body per pseudo-time step / <d> (0: plain Newton)",
+                             "", ptc_move, &ptc_move, nullptr));
   PetscCall(PetscOptionsBool("-constrain_rotation",
                              "fix the mean rotation of frictionless deformable bodies (zero-energy mode; its torque is reported)",
                              "", constrain_rotation, &constrain_rotation, nullptr));
   PetscCall(PetscOptionsBool("-secant_predictor", "start each increment from the secant extrapolation of the last two states",
                              "", secant_predictor, &secant_predictor, nullptr));
+  PetscCall(PetscOptionsReal("-newton_max_move",
+                             "largest move of a body per Newton step / <d>; longer steps are scaled down (0: no limit)", "",
+                             newton_max_move, &newton_max_move, nullptr));
   PetscCall(PetscOptionsReal("-contact_margin", "contact candidates: gap below margin x mean diameter", "",
                              contact_margin, &contact_margin, nullptr));
   PetscOptionsEnd();
@@ -68,7 +73,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
              "-friction %g: the friction coefficient must be >= 0 (the paper uses 0 to 0.8)", friction);
   PetscCheck(ncp_scale > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_ncp_scale %g must be positive", ncp_scale);
   PetscCheck(prox_eta >= 0.0, comm, PETSC_ERR_USER_INPUT, "-prox_eta %g must be >= 0", prox_eta);
-  PetscCheck(prox_initial >= 0.0, comm, PETSC_ERR_USER_INPUT, "-prox_initial %g must be >= 0", prox_initial);
+  PetscCheck(ptc_move >= 0.0 && ptc_move <= 1.0, comm, PETSC_ERR_USER_INPUT, "-ptc_move %g must be in [0, 1]", ptc_move);
+  PetscCheck(newton_max_move >= 0.0, comm, PETSC_ERR_USER_INPUT, "-newton_max_move %g must be >= 0", newton_max_move);
   PetscCheck(contact_margin > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_margin %g must be positive", contact_margin);
   PetscFunctionReturn(0);
 }
@@ -273,7 +279,7 @@ PetscErrorCode CompactionProblem::RefreshCandidates() {
 // Kinematics of one candidate: gap, slip and derivatives on its global unknowns.
 void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc) const {
   const double *z0 = u_start_.empty() ? z : u_start_.data();  // slip reference: the start of the step
-  double q[6] = {0, 0, 0, 0, 0, 0}, q0[6] = {0, 0, 0, 0, 0, 0};
+  double q[PairKinematics::kMaxDofs] = {}, q0[PairKinematics::kMaxDofs] = {};
   int nq = 0;
   auto add_node = [&](const DeformableBody &body, int node) {
     for (int i = 0; i < 2; ++i) {
@@ -299,6 +305,7 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
   const PetscInt wall_dof = WallOffset() + c.wall;
   lc->frictional = HasTangential(c);
   lc->curved = false;
+  lc->beyond = 0;
   lc->k = PairKinematics();
   for (PetscInt &d : lc->dofs) d = -1;
   switch (c.type) {
@@ -348,11 +355,11 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
     case ContactType::NodeSegment: {
       const DiskMesh &m = bodies_[c.master].mesh;
       const int nb = static_cast<int>(m.boundary.size());
-      add_node(bodies_[c.master], m.boundary[c.segment]);
-      add_node(bodies_[c.master], m.boundary[(c.segment + 1) % nb]);
+      // The master boundary around its node `segment`: five nodes, four segments.
+      for (int j = -2; j <= 2; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
       add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
-      lc->k = segment_node(q, q0);
-      lc->slave_xy = 4;
+      lc->k = patch_node(q, q0, &lc->beyond);
+      lc->slave_xy = 10;
       break;
     }
   }
@@ -610,6 +617,65 @@ PetscErrorCode NewtonMonitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx)
   PetscFunctionReturn(0);
 }
 
+// Line-search pre-check: a Newton step that would move a body (or a wall)
+// by more than newton_max_move <d> is scaled down as a whole. Far from
+// equilibrium the linearized contact geometry is valid only over a fraction
+// of a diameter; near equilibrium steps are tiny and untouched, so the
+// quadratic rate is kept. (PETSc subtracts the step: x_new = x - y.)
+PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *ctx) {
+  auto *p = static_cast<CompactionProblem *>(ctx);
+  const PetscScalar *ya;
+  PetscInt lo, hi;
+  PetscFunctionBeginUser;
+  *changed = PETSC_FALSE;
+  const double cap = p->params_.newton_max_move * p->mean_diameter_;
+  if (cap <= 0.0) PetscFunctionReturn(0);
+  // Contacts open now that the linearized step would drive deep into
+  // penetration (an overshoot of the Newton model, which has them open):
+  // shorten the step so that they just touch, but never below 1/10.
+  {
+    Vec yall;
+    const PetscScalar *xa, *yv;
+    PetscCall(VecDuplicate(p->zall_, &yall));
+    PetscCall(VecScatterBegin(p->to_all_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(p->to_all_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecGetArrayRead(p->zall_, &xa));  // the current iterate (gathered by the last residual)
+    PetscCall(VecGetArrayRead(yall, &yv));
+    const double allow = 1e-3 * p->mean_diameter_;
+    double alpha = 1.0;
+    for (const ContactCandidate &c : p->candidates_) {
+      CompactionProblem::LocalContact lc;
+      p->ContactGeometry(c, xa, &lc);
+      if (lc.k.gap <= 0.0) continue;
+      double dg = 0.0;
+      for (int a = 0; a < lc.k.ndof; ++a)
+        if (lc.dofs[a] >= 0) dg -= lc.k.dgap[a] * yv[lc.dofs[a]];
+      if (lc.k.gap + dg < -allow) alpha = std::min(alpha, (lc.k.gap + allow) / -dg);
+    }
+    PetscCall(VecRestoreArrayRead(yall, &yv));
+    PetscCall(VecRestoreArrayRead(p->zall_, &xa));
+    PetscCall(VecDestroy(&yall));
+    alpha = std::max(alpha, 0.1);
+    if (alpha < 1.0) {
+      PetscCall(VecScale(Y, alpha));
+      *changed = PETSC_TRUE;
+    }
+  }
+  PetscCall(VecGetOwnershipRange(Y, &lo, &hi));
+  PetscCall(VecGetArrayRead(Y, &ya));
+  double m = 0.0;
+  for (PetscInt i = lo; i < std::min<PetscInt>(hi, p->GaugeOffset()); ++i)
+    m = std::max(m, std::abs(ya[i - lo]) * std::sqrt(p->prox_weight_[i]));
+  PetscCall(VecRestoreArrayRead(Y, &ya));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &m, 1, MPI_DOUBLE, MPI_MAX, p->comm_));
+  if (m > cap) {
+    PetscCall(VecScale(Y, cap / m));
+    *changed = PETSC_TRUE;
+    ++p->limited_steps_;
+  }
+  PetscFunctionReturn(0);
+}
+
 PetscErrorCode CompactionProblem::DestroySolver() {
   PetscFunctionBeginUser;
   PetscCall(SNESDestroy(&snes_));
@@ -666,6 +732,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscCall(MatSetOptionsPrefix(J_, "jac_"));
   PetscCall(MatSetFromOptions(J_));
   PetscCall(MatSetPreallocationCOO(J_, static_cast<PetscCount>(ci.size()), ci.data(), cj.data()));
+  ++layouts_created_;
 
   PetscCall(SNESCreate(comm_, &snes_));
   PetscCall(SNESSetType(snes_, SNESNEWTONLS));
@@ -676,7 +743,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   // With pseudo-transient continuation a stalled inner solve (active-set or
   // slip-direction cycling) is better cut short: the outer loop then retries
   // with ten times the damping.
-  const PetscInt max_it = params_.prox_initial > 0.0 ? 15 : 50;
+  const PetscInt max_it = params_.ptc_move > 0.0 ? 15 : 50;
   PetscCall(SNESSetTolerances(snes_, 1e-11 * params_.young * mean_diameter_, 1e-30, 0.0, max_it, -1));
   SNESLineSearch ls;
   PetscCall(SNESGetLineSearch(snes_, &ls));
@@ -689,10 +756,57 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscCall(PCSetType(pc, PCLU));
   PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
   PetscCall(SNESSetFromOptions(snes_));
+  // Contact saddle points need numerical pivoting, and MUMPS' workspace
+  // estimate (made before pivoting) is then often too small (INFOG(1) = -9):
+  // reserve 100 % more unless -mat_mumps_icntl_14 says otherwise.
+  MatSolverType solver_type = nullptr;
+  PetscBool is_lu = PETSC_FALSE, icntl14_set = PETSC_FALSE;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCLU, &is_lu));
+  if (is_lu) PetscCall(PCFactorGetMatSolverType(pc, &solver_type));
+  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_14", &icntl14_set));
+  if (is_lu && solver_type && std::string(solver_type) == MATSOLVERMUMPS && !icntl14_set) {
+    Mat factor;
+    PetscCall(PCFactorSetUpMatSolverType(pc));
+    PetscCall(PCFactorGetMatrix(pc, &factor));
+    PetscCall(MatMumpsSetIcntl(factor, 14, 100));
+  }
   PetscBool monitor = PETSC_FALSE;
   PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-newton_monitor", &monitor, nullptr));
   if (monitor) PetscCall(SNESMonitorSet(snes_, NewtonMonitor, this, nullptr));
+  PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-ptc_monitor", &monitor_outer_, nullptr));
+  PetscCall(SNESGetLineSearch(snes_, &ls));
+  PetscCall(SNESLineSearchSetPreCheck(ls, LimitStep, this));
   PetscFunctionReturn(0);
+}
+
+// Largest unbalanced force of a residual F: body and wall rows, rigid
+// rotations (torques) divided by the radius.
+PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force) const {
+  const PetscScalar *fa;
+  PetscInt lo, hi;
+  PetscFunctionBeginUser;
+  PetscCall(VecGetOwnershipRange(F, &lo, &hi));
+  PetscCall(VecGetArrayRead(F, &fa));
+  double m = 0.0;
+  for (PetscInt i = lo; i < std::min<PetscInt>(hi, GaugeOffset()); ++i)
+    m = std::max(m, std::abs(fa[i - lo]) / std::sqrt(prox_weight_[i]));
+  PetscCall(VecRestoreArrayRead(F, &fa));
+  PetscCallMPI(MPI_Allreduce(&m, force, 1, MPI_DOUBLE, MPI_MAX, comm_));
+  PetscFunctionReturn(0);
+}
+
+LayoutSizes CompactionProblem::Sizes() {
+  LayoutSizes s;
+  if (!snes_ && SetUpLayout() != 0) return s;
+  s.total = n_total_;
+  for (const RigidBody &r : rigid_) s.rigid += RigidDofs(), (void)r;
+  s.deformable = n_body_dofs_ - s.rigid;
+  s.gauges = static_cast<PetscInt>(torque_.size());
+  s.normal = static_cast<PetscInt>(candidates_.size());
+  s.tangential = n_total_ - TangentialOffset();
+  MatInfo info;
+  if (MatGetInfo(J_, MAT_GLOBAL_SUM, &info) == 0) s.jacobian_nonzeros = static_cast<PetscInt>(info.nz_used);
+  return s;
 }
 
 double CompactionProblem::ProximalDiagonal(PetscInt i) const {
@@ -719,15 +833,18 @@ PetscErrorCode CompactionProblem::EvaluateJacobian(Vec z, Mat *J) {
 PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   PetscFunctionBeginUser;
   *report = SolveReport();
+  const int layouts_before = layouts_created_;
   const State saved = SaveState();
   const double saved_pressure = pressure_;
   u_start_ = u_;
   // Secant predictor along the load path: extrapolate the bodies and walls
-  // from the last two converged states (none for the first increment).
+  // from the last two converged states (none for the first two increments:
+  // the state at P = 0 is the unloaded packing, whose settling is not a
+  // response proportional to the load).
   // The extrapolation is halved while it would make bodies overlap by more
   // than 1e-3 <d> or invert an element: the first Newton step has to close
   // every predicted overlap at once, whatever the damping.
-  if (params_.secant_predictor && have_previous_ && pressure_ != previous_pressure_) {
+  if (params_.secant_predictor && have_previous_ && previous_pressure_ > 0.0 && pressure_ != previous_pressure_) {
     double t = (pressure - pressure_) / (pressure_ - previous_pressure_);
     for (int attempt = 0; attempt < 5; ++attempt, t *= 0.5) {
       for (size_t i = 0; i < u_.size(); ++i) u_[i] = saved.u[i] + t * (saved.u[i] - previous_.u[i]);
@@ -740,23 +857,46 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       if (attempt == 4) u_ = saved.u, std::copy(saved.w, saved.w + 4, w_);
     }
   }
+  // Contact forces scale with the pressure: for rigid disks the scaled
+  // multipliers at the same geometry are the exact equilibrium of the new
+  // level, for deformable ones the first-order guess.
+  if (pressure_ > 0.0 && pressure != pressure_) {
+    const double scale = pressure / pressure_;
+    for (double &l : lambda_) l *= scale;
+    for (double &l : lambda_t_) l *= scale;
+    for (double &t : torque_) t *= scale;
+  }
   pressure_ = pressure;
   PetscCall(RefreshCandidates());
-  // Pseudo-transient continuation. With prox_initial > 0 the equations get the
-  // term rho_a D (z - z_a), z_a the state at the start of the inner solve:
-  // each SNES solve is then an implicit step of a damped dynamics in which
+  // Pseudo-transient continuation (-ptc_move > 0). The equations get the term
+  // rho_a D (z - z_a), z_a the state at the start of the inner solve: each
+  // SNES solve is an implicit step of an overdamped dynamics in which
   // rattlers, free rotations and sliding particles move a bounded distance.
-  // After every inner solve the anchor moves to the solution and rho_a falls
-  // tenfold when the solve was easy (grows tenfold when it failed); the level
-  // is converged when the residual WITHOUT the term is below tolerance, so the
-  // regularization has vanished at the accepted equilibrium.
+  // rho_a = |F|_inf / (m <d>), F the force residual without the term: an
+  // unbalanced force moves a body by at most about m <d> per step (so the
+  // linearized contact geometry stays valid), and rho_a vanishes with the
+  // residual, so the steps grow to plain Newton steps near equilibrium
+  // (switched evolution relaxation). m doubles after an easy inner solve and
+  // is divided by 4 after a failed one. The level is converged when the
+  // residual WITHOUT the term is below tolerance with a stable contact state,
+  // so the regularization has vanished at the accepted equilibrium.
   const double pen_tol = 1e-9 * mean_diameter_;
-  const double rho_floor = params_.prox_eta * params_.young, rho_ceiling = 1e3 * params_.young;
-  rho_anchor_ = params_.prox_initial * pressure;
-  double rho_last = rho_anchor_;
+  const double rho_floor = params_.prox_eta * params_.young;
+  const bool ptc = params_.ptc_move > 0.0;
+  double move = params_.ptc_move;
   const int max_outer = 300;
+  int failures = 0;  // failed inner solves in a row
+  double force_residual = 0.0;
+  if (ptc) {
+    if (!snes_) PetscCall(SetUpLayout());
+    PetscCall(PackState(z_));
+    rho_anchor_ = 0.0;
+    PetscCall(FormFunction(nullptr, z_, r_, this));
+    PetscCall(ForceResidual(r_, &force_residual));
+  }
   for (int outer = 0, refresh = 0;; ++outer) {
     if (!snes_) PetscCall(SetUpLayout());
+    rho_anchor_ = ptc ? std::max(rho_floor, force_residual / (move * mean_diameter_)) : 0.0;
     anchor_.assign(u_.begin(), u_.end());
     anchor_.insert(anchor_.end(), w_, w_ + 4);
     PetscCall(PackState(z_));
@@ -772,9 +912,9 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     report->newton_its += its;
     PetscCall(SNESGetFunctionNorm(snes_, &report->residual));
     if (report->reason <= 0) {
-      // Retry from the anchor with a stronger damping, or give up.
-      if (rho_last > 0.0 && outer < max_outer && 10.0 * rho_last <= rho_ceiling) {
-        rho_anchor_ = rho_last = 10.0 * std::max(rho_last, rho_floor);
+      // Retry from the anchor with shorter pseudo-time steps, or give up.
+      if (ptc && outer < max_outer && ++failures <= 8) {
+        move *= 0.25;
         continue;
       }
       rho_anchor_ = 0.0;
@@ -789,31 +929,60 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     Unpack(za);
     PetscCall(VecRestoreArrayRead(zall_, &za));
     // A point that was not a candidate may have crossed another body or a
-    // wall during the solve, or a node may have slid onto the next segment:
-    // update the candidates and solve again.
-    std::map<std::tuple<int, int, int, int, int>, int> current;
-    for (const ContactCandidate &c : candidates_) current[CandidateKey(c)] = c.segment;
+    // wall during the solve, or a node may have slid out of its segment
+    // window: update the candidates and solve again.
+    // A node-segment pair is stale only when its closest point has left the
+    // pair's two-segment window (inside it the gap is continuous).
+    std::set<std::tuple<int, int, int, int, int>> current;
+    for (const ContactCandidate &c : candidates_) current.insert(CandidateKey(c));
     bool stale = false;
-    for (const ContactCandidate &c : DetectCandidates(-pen_tol / mean_diameter_)) {
-      auto it = current.find(CandidateKey(c));
-      if (it == current.end() || it->second != c.segment) stale = true;
+    for (const ContactCandidate &c : DetectCandidates(-pen_tol / mean_diameter_))
+      if (!current.count(CandidateKey(c))) stale = true;
+    std::vector<double> zfull(n_total_);
+    Pack(zfull.data());
+    for (const ContactCandidate &c : candidates_) {
+      if (stale || c.type != ContactType::NodeSegment) continue;
+      LocalContact lc;
+      ContactGeometry(c, zfull.data(), &lc);
+      if (lc.beyond != 0 && lc.k.gap < params_.contact_margin * mean_diameter_) stale = true;
     }
-    if (stale && refresh < 5) {
+    if (stale && (ptc || refresh < 5)) {
       PetscCall(RefreshCandidates());
       ++report->candidate_refreshes;
       ++refresh;
-      continue;
+      if (!ptc) continue;
     }
-    if (rho_anchor_ == 0.0) break;
+    if (!ptc) break;
     // Equilibrium test without the pseudo-transient term.
     const std::vector<char> active_inner = active_now_;
-    const double rho_used = rho_anchor_;
     rho_anchor_ = 0.0;
+    if (!snes_) PetscCall(SetUpLayout());
+    PetscCall(PackState(z_));
     PetscReal true_norm;
     PetscCall(FormFunction(nullptr, z_, r_, this));
     PetscCall(VecNorm(r_, NORM_2, &true_norm));
+    PetscCall(ForceResidual(r_, &force_residual));
     report->residual = true_norm;
-    if (true_norm <= atol && active_now_ == active_inner) break;
+    if (monitor_outer_) {
+      // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
+      double part[5] = {0, 0, 0, 0, 0};
+      const PetscScalar *ra;
+      PetscInt lo, hi;
+      PetscCall(VecGetOwnershipRange(r_, &lo, &hi));
+      PetscCall(VecGetArrayRead(r_, &ra));
+      for (PetscInt i = lo; i < hi; ++i) {
+        const int k = i < WallOffset() ? 0 : i < GaugeOffset() ? 1 : i < MultiplierOffset() ? 2 : i < TangentialOffset() ? 3 : 4;
+        part[k] += ra[i - lo] * ra[i - lo];
+      }
+      PetscCall(VecRestoreArrayRead(r_, &ra));
+      PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, part, 5, MPI_DOUBLE, MPI_SUM, comm_));
+      PetscCall(PetscPrintf(comm_,
+                            "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)  |F|_inf %.3e  move %.2e  its %" PetscInt_FMT "%s\n",
+                            outer, (double)true_norm, std::sqrt(part[0]), std::sqrt(part[1]), std::sqrt(part[2]),
+                            std::sqrt(part[3]), std::sqrt(part[4]), force_residual, move, its,
+                            stale ? "  (candidates refreshed)" : ""));
+    }
+    if (!stale && true_norm <= atol && active_now_ == active_inner) break;
     if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step
       report->reason = SNES_DIVERGED_MAX_IT;
       RestoreState(saved);
@@ -821,12 +990,12 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       u_start_ = u_;
       PetscFunctionReturn(0);
     }
-    rho_anchor_ = its <= 6 ? rho_used / 3.0 : rho_used;
-    if (rho_anchor_ < rho_floor) rho_anchor_ = rho_floor;
-    rho_last = rho_anchor_;
+    failures = 0;
+    if (its <= 5) move = std::min(2.0 * move, 1.0);
   }
   rho_anchor_ = 0.0;
   report->converged = true;
+  report->layouts = layouts_created_ - layouts_before;
   for (char a : active_now_) report->active_contacts += a != kOpen;
   previous_ = saved;
   previous_pressure_ = saved_pressure;

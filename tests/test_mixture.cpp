@@ -37,7 +37,7 @@ std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern defor
   ProblemParameters p;
   p.friction = friction;
   p.constrain_rotation = PETSC_FALSE;
-  p.prox_initial = 10.0;  // as the compact driver: pseudo-transient continuation
+  p.ptc_move = 0.02;  // as the compact driver: pseudo-transient continuation
   auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
   if (problem->SetParameters(p)) return nullptr;
   const DiskMesh mesh = make_disk_mesh(0.5, 92, 2);

@@ -24,6 +24,8 @@ struct LevelReport {
   PetscInt newton_its = 0;   // all Newton iterations of the level, failed sub-steps included
   int substeps = 0;          // accepted sub-steps
   int cuts = 0;              // rejected sub-steps
+  int inner_solves = 0;      // SNES solves (pseudo-time steps, candidate refreshes)
+  int layouts = 0;           // new sparsity patterns (symbolic factorizations) in accepted sub-steps
   double seconds = 0.0;
   bool converged = false;
 };

@@ -73,7 +73,8 @@ struct ProblemParameters {
   NcpFunction ncp = NcpFunction::Min;
   double ncp_scale = 1.0;        // c_n = c_t = ncp_scale * E
   double prox_eta = 1e-8;        // smallest rho / E
-  double prox_initial = 0.0;     // rho at the first Newton iterate / P (0: rho = prox_eta * E throughout)
+  double ptc_move = 0.0;         // pseudo-transient continuation: move per pseudo-time step / <d> (0: plain Newton)
+  double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
   PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path
@@ -148,6 +149,19 @@ struct SolveReport {
   int active_contacts = 0;
   int candidate_refreshes = 0;  // re-solves because a non-candidate penetrated or a node changed segment
   int inner_solves = 0;         // SNES solves (pseudo-transient steps and re-solves included)
+  int layouts = 0;              // new unknown layouts (each one a new sparsity pattern: symbolic factorization)
+};
+
+// Sizes of the current unknown layout: what the scene needs and nothing else
+// (no tangential unknowns without friction, no rigid unknowns at kappa = 1, ...).
+struct LayoutSizes {
+  PetscInt total = 0;
+  PetscInt deformable = 0;   // nodal displacements of deformable disks
+  PetscInt rigid = 0;        // rigid-disk unknowns (2 or 3 per disk)
+  PetscInt gauges = 0;       // rotation gauges
+  PetscInt normal = 0;       // normal multipliers (= contact candidates)
+  PetscInt tangential = 0;   // tangential multipliers
+  PetscInt jacobian_nonzeros = 0;
 };
 
 // Observables of the current state.
@@ -200,6 +214,7 @@ class CompactionProblem {
   void RestoreState(const State &s);
 
   StateSummary Summary() const;
+  LayoutSizes Sizes();
   std::vector<ContactForce> ContactForces() const;
   const std::vector<DeformableBody> &Bodies() const { return bodies_; }
   const std::vector<RigidBody> &RigidBodies() const { return rigid_; }
@@ -245,6 +260,7 @@ class CompactionProblem {
 
  private:
   friend PetscErrorCode FormFunction(SNES, Vec, Vec, void *);
+  friend PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec, PetscBool *, void *);
   friend PetscErrorCode FormJacobian(SNES, Vec, Mat, Mat, void *);
   friend PetscErrorCode NewtonMonitor(SNES, PetscInt, PetscReal, void *);
   friend PetscErrorCode ConvergenceTest(SNES, PetscInt, PetscReal, PetscReal, PetscReal, SNESConvergedReason *, void *);
@@ -256,11 +272,13 @@ class CompactionProblem {
     bool frictional = false;
     bool curved = false;   // the gap / slip have second derivatives
     int slave_xy = 0;      // local index of the slave's x unknown (force on the slave)
+    int beyond = 0;        // node-segment: the closest point left the pair's window (window_node)
   };
   void ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc) const;
   PetscErrorCode SetUpLayout();      // sizes, Vec/Mat/SNES for the current candidate set
   PetscErrorCode DestroySolver();
   PetscErrorCode Gather(Vec z);      // z -> replicated zall_ array
+  PetscErrorCode ForceResidual(Vec F, double *force) const;  // largest unbalanced force (body and wall rows)
   PetscErrorCode Assemble(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
                           std::vector<PetscScalar> *cv, bool *inverted, std::vector<char> *active);
   void Unpack(const double *z);
@@ -311,6 +329,10 @@ class CompactionProblem {
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
   std::vector<PetscScalar> coo_values_;
+  PetscBool monitor_outer_ = PETSC_FALSE;  // -ptc_monitor: one line per pseudo-time step
+  long limited_steps_ = 0;
+  int layouts_created_ = 0;         // SetUpLayout calls (symbolic factorizations)
+  PetscInt coo_entries_ = 0;          // Newton steps shortened by newton_max_move (diagnostics)
 };
 
 }  // namespace deformix
