@@ -97,6 +97,9 @@ PetscErrorCode Run(MPI_Comm comm) {
   // Packings have floppy modes (rattlers, free rotations, sliding before the
   // network closes): pseudo-transient continuation with full Newton steps.
   params.ptc_move = 0.02;
+  // The paper's level criterion (unbalanced forces below 1e-4 P <d>, phi
+  // settled to 1e-4) besides exact equilibrium: see -level_force_rtol.
+  params.level_force_rtol = 1e-4;
   params.newton_max_move = 0.05;
   PetscBool has_ls = PETSC_FALSE;
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-snes_linesearch_type", &has_ls));
@@ -157,7 +160,8 @@ PetscErrorCode Run(MPI_Comm comm) {
                         "sigma_yy_over_E", "P_sigma_over_E", "K_over_E", "mean_volumetric_strain", "contacts",
                         "sliding_contacts", "newton_its", "substeps", "cuts", "seconds", "max_penetration", "pseudo_time_steps",
                         "symbolic_factorizations", "unknowns", "rigid_unknowns", "deformable_unknowns",
-                        "tangential_unknowns", "candidates", "jacobian_nonzeros"}));
+                        "tangential_unknowns", "candidates", "jacobian_nonzeros", "force_residual_over_Pd",
+                        "relaxed_substeps"}));
   const std::string h5 = opts.output_dir + "/levels.h5";
   // Results of an earlier run in this directory must not mix with this one.
   PetscCall(RemoveFile(comm, h5));
@@ -201,7 +205,8 @@ PetscErrorCode Run(MPI_Comm comm) {
                          double(rep.newton_its), double(rep.substeps), double(rep.cuts), rep.seconds,
                          o.max_penetration, double(rep.inner_solves), double(rep.layouts), double(sizes.total),
                          double(sizes.rigid), double(sizes.deformable), double(sizes.tangential),
-                         double(sizes.normal), double(sizes.jacobian_nonzeros)}));
+                         double(sizes.normal), double(sizes.jacobian_nonzeros),
+                         rep.force_residual / (P * problem.MeanDiameter()), double(rep.relaxed_substeps)}));
     if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
     PetscCall(PetscLogStagePop());
   }

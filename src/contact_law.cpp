@@ -47,7 +47,10 @@ TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double s
     return r;
   }
   const double bound = mu * a, trial = lambda_t - c_t * slip;
-  if (std::abs(trial) <= bound) {
+  // Stick needs a cone to stick in: with mu = 0 (friction switched off) a
+  // zero trial (no slip, no tangential force, e.g. at the start of a step)
+  // must not lock the tangential motion.
+  if (bound > 0.0 && std::abs(trial) <= bound) {
     r.state = kClosed;
     r.value = c_t * slip;
     r.d_slip = c_t;

@@ -44,6 +44,8 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
     report->layouts += solve.layouts;
     if (solve.converged) {
       P = Pnext;
+      report->force_residual = solve.force_residual;
+      report->relaxed_substeps += solve.relaxed;
       ++report->substeps;
       cuts_in_a_row = 0;
       // Easy: few Newton iterations per inner solve (pseudo-transient steps count separately).

@@ -58,6 +58,12 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "", constrain_rotation, &constrain_rotation, nullptr));
   PetscCall(PetscOptionsBool("-secant_predictor", "start each increment from the secant extrapolation of the last two states",
                              "", secant_predictor, &secant_predictor, nullptr));
+  PetscCall(PetscOptionsReal("-level_force_rtol",
+                             "accept a level when the largest unbalanced force is below this x P <d> and phi has settled "
+                             "(with -ptc_move; 0: only exact equilibrium, |R| below the absolute tolerance)",
+                             "", level_force_rtol, &level_force_rtol, nullptr));
+  PetscCall(PetscOptionsReal("-level_phi_rtol", "... and the packing fraction changed by less than this (relative) in the last pseudo-time step",
+                             "", level_phi_rtol, &level_phi_rtol, nullptr));
   PetscCall(PetscOptionsReal("-newton_max_move",
                              "largest move of a body per Newton step / <d>; longer steps are scaled down (0: no limit)", "",
                              newton_max_move, &newton_max_move, nullptr));
@@ -74,6 +80,9 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCheck(ncp_scale > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_ncp_scale %g must be positive", ncp_scale);
   PetscCheck(prox_eta >= 0.0, comm, PETSC_ERR_USER_INPUT, "-prox_eta %g must be >= 0", prox_eta);
   PetscCheck(ptc_move >= 0.0 && ptc_move <= 1.0, comm, PETSC_ERR_USER_INPUT, "-ptc_move %g must be in [0, 1]", ptc_move);
+  PetscCheck(level_force_rtol >= 0.0 && level_force_rtol < 1.0, comm, PETSC_ERR_USER_INPUT,
+             "-level_force_rtol %g must be in [0, 1)", level_force_rtol);
+  PetscCheck(level_phi_rtol > 0.0, comm, PETSC_ERR_USER_INPUT, "-level_phi_rtol %g must be positive", level_phi_rtol);
   PetscCheck(newton_max_move >= 0.0, comm, PETSC_ERR_USER_INPUT, "-newton_max_move %g must be >= 0", newton_max_move);
   PetscCheck(contact_margin > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_margin %g must be positive", contact_margin);
   PetscFunctionReturn(0);
@@ -93,6 +102,7 @@ PetscErrorCode CompactionProblem::SetParameters(const ProblemParameters &p) {
   PetscCheck(rigid_.empty() || (p.friction > 0.0) == Frictional(), comm_, PETSC_ERR_ORDER,
              "set the friction before adding rigid bodies (it decides their rotation unknowns)");
   params_ = p;
+  ncp_now_ = p.ncp;
   material_ = NeoHookean::from_young_poisson(p.young, p.poisson);
   torque_.assign(params_.constrain_rotation ? bodies_.size() : 0, 0.0);
   PetscCall(DestroySolver());
@@ -128,7 +138,7 @@ int CompactionProblem::AddDeformableBody(const DiskMesh &mesh, double cx, double
   n_body_dofs_ += 2 * mesh.num_nodes();
   u_.resize(n_body_dofs_, 0.0);
   bodies_.push_back(std::move(body));
-  mean_diameter_ = MeanDiameter(bodies_, rigid_);
+  mean_diameter_ = deformix::MeanDiameter(bodies_, rigid_);
   torque_.assign(params_.constrain_rotation ? bodies_.size() : 0, 0.0);
   DestroySolver();
   return static_cast<int>(bodies_.size()) - 1;
@@ -144,7 +154,7 @@ int CompactionProblem::AddRigidBody(double cx, double cy, double radius) {
   n_body_dofs_ += RigidDofs();
   u_.resize(n_body_dofs_, 0.0);
   rigid_.push_back(body);
-  mean_diameter_ = MeanDiameter(bodies_, rigid_);
+  mean_diameter_ = deformix::MeanDiameter(bodies_, rigid_);
   DestroySolver();
   return static_cast<int>(rigid_.size()) - 1;
 }
@@ -490,7 +500,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
     const int nd = k.ndof;
     const PetscInt ln_dof = lam_off + static_cast<PetscInt>(c), lt_dof = tangential_index_[c];
     const double lam_n = z[ln_dof], lam_t = lt_dof >= 0 ? z[lt_dof] : 0.0;
-    const NormalNcp ncp = normal_ncp(params_.ncp, lam_n, k.gap, c_n);
+    const NormalNcp ncp = normal_ncp(ncp_now_, lam_n, k.gap, c_n);
     TangentialNcp tan;
     if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t);
     if (active) (*active)[c] = lt_dof >= 0 ? tan.state : (ncp.active ? kClosed : kOpen);
@@ -788,9 +798,34 @@ PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force) const {
   PetscCall(VecGetOwnershipRange(F, &lo, &hi));
   PetscCall(VecGetArrayRead(F, &fa));
   double m = 0.0;
+  PetscInt where = -1;
   for (PetscInt i = lo; i < std::min<PetscInt>(hi, GaugeOffset()); ++i)
-    m = std::max(m, std::abs(fa[i - lo]) / std::sqrt(prox_weight_[i]));
+    if (std::abs(fa[i - lo]) / std::sqrt(prox_weight_[i]) > m) m = std::abs(fa[i - lo]) / std::sqrt(prox_weight_[i]), where = i;
   PetscCall(VecRestoreArrayRead(F, &fa));
+  if (monitor_outer_ && where >= 0) {
+    std::string what = "wall";
+    for (const DeformableBody &b : bodies_)
+      if (where >= b.dof_offset && where < b.dof_offset + 2 * b.mesh.num_nodes())
+        what = "deformable particle " + std::to_string(b.particle) + " node " + std::to_string((where - b.dof_offset) / 2);
+    for (const RigidBody &r : rigid_)
+      if (where >= r.dof_offset && where < r.dof_offset + RigidDofs())
+        what = "rigid particle " + std::to_string(r.particle) + " dof " + std::to_string(where - r.dof_offset);
+    PetscCall(PetscPrintf(PETSC_COMM_SELF, "    largest force %.3e on %s\n", m, what.c_str()));
+    if (getenv("DEFORMIX_DEBUG_CONTACTS")) {
+      std::vector<double> zf(n_total_);
+      Pack(zf.data());
+      for (size_t c = 0; c < candidates_.size(); ++c) {
+        LocalContact lc;
+        ContactGeometry(candidates_[c], zf.data(), &lc);
+        bool touches = false;
+        for (int a = 0; a < lc.k.ndof; ++a) touches |= lc.dofs[a] == where || lc.dofs[a] == (where ^ 1);
+        if (touches)
+          PetscCall(PetscPrintf(PETSC_COMM_SELF, "      candidate type %d body %d point %d master %d seg %d gap %.3e lambda %.3e beyond %d n (%.3f %.3f)\n",
+                                (int)candidates_[c].type, candidates_[c].body, candidates_[c].point, candidates_[c].master,
+                                candidates_[c].segment, lc.k.gap, lambda_[c], lc.beyond, lc.k.normal[0], lc.k.normal[1]));
+      }
+    }
+  }
   PetscCallMPI(MPI_Allreduce(&m, force, 1, MPI_DOUBLE, MPI_MAX, comm_));
   PetscFunctionReturn(0);
 }
@@ -834,6 +869,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   PetscFunctionBeginUser;
   *report = SolveReport();
   const int layouts_before = layouts_created_;
+  ncp_now_ = params_.ncp;
   const State saved = SaveState();
   const double saved_pressure = pressure_;
   u_start_ = u_;
@@ -886,6 +922,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   double move = params_.ptc_move;
   const int max_outer = 300;
   int failures = 0;  // failed inner solves in a row
+  double phi_last = -1.0;
   double force_residual = 0.0;
   if (ptc) {
     if (!snes_) PetscCall(SetUpLayout());
@@ -912,13 +949,21 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     report->newton_its += its;
     PetscCall(SNESGetFunctionNorm(snes_, &report->residual));
     if (report->reason <= 0) {
+      if (monitor_outer_)
+        PetscCall(PetscPrintf(comm_, "  ptc %3d  inner solve failed (%s after %" PetscInt_FMT " its, rho_a %.2e)\n", outer,
+                              SNESConvergedReasons[report->reason], its, rho_anchor_));
       // Retry from the anchor with shorter pseudo-time steps, or give up.
+      // A failed inner solve is usually an active-set cycle of the min NCP
+      // function on weakly active contacts (lambda ~ 0, g ~ 0); the retry
+      // uses Fischer-Burmeister, which is smooth there, for the rest of the sub-step.
       if (ptc && outer < max_outer && ++failures <= 8) {
         move *= 0.25;
+        ncp_now_ = NcpFunction::FischerBurmeister;
         continue;
       }
       rho_anchor_ = 0.0;
       RestoreState(saved);
+      ncp_now_ = params_.ncp;
       pressure_ = saved_pressure;
       u_start_ = u_;
       PetscFunctionReturn(0);
@@ -963,9 +1008,9 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     PetscCall(VecNorm(r_, NORM_2, &true_norm));
     PetscCall(ForceResidual(r_, &force_residual));
     report->residual = true_norm;
-    if (monitor_outer_) {
-      // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
-      double part[5] = {0, 0, 0, 0, 0};
+    // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
+    double part[5] = {0, 0, 0, 0, 0};
+    {
       const PetscScalar *ra;
       PetscInt lo, hi;
       PetscCall(VecGetOwnershipRange(r_, &lo, &hi));
@@ -976,16 +1021,32 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       }
       PetscCall(VecRestoreArrayRead(r_, &ra));
       PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, part, 5, MPI_DOUBLE, MPI_SUM, comm_));
+    }
+    const double phi = Summary().packing_fraction;
+    if (monitor_outer_) {
       PetscCall(PetscPrintf(comm_,
                             "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)  |F|_inf %.3e  move %.2e  its %" PetscInt_FMT "%s\n",
                             outer, (double)true_norm, std::sqrt(part[0]), std::sqrt(part[1]), std::sqrt(part[2]),
                             std::sqrt(part[3]), std::sqrt(part[4]), force_residual, move, its,
                             stale ? "  (candidates refreshed)" : ""));
     }
-    if (!stale && true_norm <= atol && active_now_ == active_inner) break;
+    report->force_residual = force_residual;
+    const bool settled = !stale && active_now_ == active_inner;
+    if (settled && true_norm <= atol) break;  // exact equilibrium
+    // The paper's level criterion: unbalanced forces small compared with the
+    // contact forces (P <d>), the packing fraction no longer changing, and
+    // the contact conditions (Signorini, Coulomb) still satisfied exactly.
+    const double ncp_norm = std::sqrt(part[3] * part[3] + part[4] * part[4]);
+    if (settled && params_.level_force_rtol > 0.0 && force_residual <= params_.level_force_rtol * pressure * mean_diameter_ &&
+        ncp_norm <= atol && std::abs(phi - phi_last) <= params_.level_phi_rtol * phi) {
+      report->relaxed = true;
+      break;
+    }
+    phi_last = phi;
     if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step
       report->reason = SNES_DIVERGED_MAX_IT;
       RestoreState(saved);
+      ncp_now_ = params_.ncp;
       pressure_ = saved_pressure;
       u_start_ = u_;
       PetscFunctionReturn(0);
@@ -994,6 +1055,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     if (its <= 5) move = std::min(2.0 * move, 1.0);
   }
   rho_anchor_ = 0.0;
+  ncp_now_ = params_.ncp;
   report->converged = true;
   report->layouts = layouts_created_ - layouts_before;
   for (char a : active_now_) report->active_contacts += a != kOpen;

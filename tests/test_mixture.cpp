@@ -12,6 +12,8 @@
 //  3. The Jacobian of a frictional mixture (rigid-rigid, rigid-node,
 //     node-segment, walls) against central finite differences of the residual.
 //  4. Kernel: the Coulomb NCP function's stick, slip and open branches.
+//  5. A random 20-disk mixture with friction (the compact driver's scene):
+//     Signorini, Coulomb, level criterion and virial check.
 #include <gtest/gtest.h>
 #include <petscsnes.h>
 
@@ -23,6 +25,7 @@
 #include "deformix/contact_law.hpp"
 #include "deformix/load_controller.hpp"
 #include "deformix/observables.hpp"
+#include "deformix/packing.hpp"
 #include "deformix/problem.hpp"
 
 using namespace deformix;
@@ -216,6 +219,70 @@ TEST(CoulombLaw, StickSlipAndOpenBranches) {
   TangentialNcp open = coulomb_ncp(0.2, 0.0, 0.1, 0.3, mu, c, c);
   EXPECT_EQ(open.state, kOpen);
   EXPECT_DOUBLE_EQ(open.value, 0.2);
+  // Friction switched off (mu = 0) on a closed contact at the start of a step
+  // (no slip, no tangential force): lambda_t = 0, the slip stays free. (A
+  // stick row c s = 0 here locked the tangential motion of every contact.)
+  TangentialNcp off = coulomb_ncp(0.0, 1.0, 0.0, 0.0, 0.0, c, c);
+  EXPECT_EQ(off.state, kSliding);
+  EXPECT_DOUBLE_EQ(off.value, 0.0);
+  EXPECT_DOUBLE_EQ(off.d_slip, 0.0);
+  EXPECT_DOUBLE_EQ(off.d_lambda_t, 1.0);
+}
+
+// A random 20-disk mixture (the compact driver's scene and protocol):
+// Signorini and Coulomb hold exactly at every contact, the unbalanced forces
+// meet the level criterion, and the contact stress matches P to that accuracy.
+TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
+  DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
+  assign_deformable(packing, 0.5, 1);
+  ProblemParameters p;
+  p.friction = 0.2;
+  p.constrain_rotation = PETSC_FALSE;
+  p.ptc_move = 0.02;
+  p.newton_max_move = 0.05;
+  p.level_force_rtol = 1e-4;
+  CompactionProblem problem(PETSC_COMM_WORLD);
+  ASSERT_PETSC(problem.SetParameters(p));
+  const DiskMesh unit = make_disk_mesh(1.0, 92, 2);
+  int n_def = 0, n_rigid = 0;
+  for (int i = 0; i < packing.size(); ++i) {
+    if (packing.deformable[i]) {
+      DiskMesh m = unit;
+      m.radius = packing.radius[i];
+      for (double &x : m.X) x *= packing.radius[i];
+      problem.AddDeformableBody(m, packing.x[i], packing.y[i]);
+      ++n_def;
+    } else {
+      problem.AddRigidBody(packing.x[i], packing.y[i], packing.radius[i]);
+      ++n_rigid;
+    }
+  }
+  ASSERT_GT(n_def, 0);
+  ASSERT_GT(n_rigid, 0);
+  problem.SetWalls(packing.walls);
+  LoadControlParameters load;
+  double step = -1.0;
+  int level = 0;
+  for (double P : {1e-4, 1e-3}) {
+    problem.SetFrictionActive(level++ > 0);  // the driver's protocol: settle frictionless first
+    LevelReport rep;
+    ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
+    EXPECT_LE(rep.force_residual, 1e-4 * P * problem.MeanDiameter());
+    int frictional = 0, sliding = 0;
+    for (const ContactForce &f : problem.ContactForces()) {
+      EXPECT_GE(f.gap, -1e-9 * problem.MeanDiameter()) << "penetration";
+      EXPECT_GE(f.normal_multiplier, -1e-10 * P) << "tensile contact force";
+      EXPECT_LE(std::abs(f.normal_multiplier * f.gap), 1e-10 * P) << "complementarity";
+      if (level > 1) EXPECT_LE(std::abs(f.tangential_multiplier), 0.2 * f.normal_multiplier + 1e-10 * P) << "Coulomb cone";
+      frictional += f.tangential_multiplier != 0.0;
+      sliding += f.state == kSliding;
+    }
+    if (level > 1) EXPECT_GT(frictional, 0) << "friction carries force at the second level";
+    const PackingObservables o = ComputeObservables(problem);
+    // Unbalanced forces up to 1e-4 P <d> per unknown: the virial mean stress within 1e-3 P.
+    EXPECT_NEAR(o.mean_stress, P, 1e-3 * P);
+    EXPECT_GT(o.coordination, 2.0);
+  }
 }
 
 }  // namespace

@@ -25,6 +25,8 @@ struct LevelReport {
   int substeps = 0;          // accepted sub-steps
   int cuts = 0;              // rejected sub-steps
   int inner_solves = 0;      // SNES solves (pseudo-time steps, candidate refreshes)
+  double force_residual = 0.0;  // largest unbalanced force at the level's final state
+  int relaxed_substeps = 0;     // sub-steps accepted by the relative criterion (-level_force_rtol)
   int layouts = 0;           // new sparsity patterns (symbolic factorizations) in accepted sub-steps
   double seconds = 0.0;
   bool converged = false;

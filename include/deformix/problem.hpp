@@ -74,6 +74,8 @@ struct ProblemParameters {
   double ncp_scale = 1.0;        // c_n = c_t = ncp_scale * E
   double prox_eta = 1e-8;        // smallest rho / E
   double ptc_move = 0.0;         // pseudo-transient continuation: move per pseudo-time step / <d> (0: plain Newton)
+  double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
+  double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
@@ -149,6 +151,8 @@ struct SolveReport {
   int active_contacts = 0;
   int candidate_refreshes = 0;  // re-solves because a non-candidate penetrated or a node changed segment
   int inner_solves = 0;         // SNES solves (pseudo-transient steps and re-solves included)
+  double force_residual = 0.0;  // largest unbalanced force at the accepted state (PTC only)
+  bool relaxed = false;         // accepted by the paper's criterion (level_force_rtol), not at |R| <= atol
   int layouts = 0;              // new unknown layouts (each one a new sparsity pattern: symbolic factorization)
 };
 
@@ -224,6 +228,7 @@ class CompactionProblem {
   const ProblemParameters &Parameters() const { return params_; }
   const NeoHookean &Material() const { return material_; }
   double Pressure() const { return pressure_; }
+  double MeanDiameter() const { return mean_diameter_; }
   bool Frictional() const { return params_.friction > 0.0; }
   // Current coordinates of node a of body b.
   void NodePosition(int b, int a, double x[2]) const;
@@ -329,6 +334,7 @@ class CompactionProblem {
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
   std::vector<PetscScalar> coo_values_;
+  NcpFunction ncp_now_ = NcpFunction::Min;  // NCP function of the current inner solve (see Solve)
   PetscBool monitor_outer_ = PETSC_FALSE;  // -ptc_monitor: one line per pseudo-time step
   long limited_steps_ = 0;
   int layouts_created_ = 0;         // SetUpLayout calls (symbolic factorizations)
