@@ -7,19 +7,24 @@ static const char help[] =
     "overlap); a fraction kappa of the particle area is turned deformable, homogeneously in space;\n"
     "the first level settles it into exact contact without friction, then friction is switched on\n"
     "(-settle_frictionless); each level of -pressures (P/E) is reached quasistatically with\n"
-    "automatic sub-stepping, each level being exact equilibrium of\n"
+    "automatic sub-stepping, each level being equilibrium of\n"
     "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
-    "solved by semismooth Newton in one PETSc SNES (MUMPS LU).\n\n"
+    "solved by semismooth Newton in one PETSc SNES (MUMPS LU) inside pseudo-transient continuation.\n"
+    "A level is accepted at exact equilibrium or by the paper's criterion: unbalanced forces\n"
+    "<= -level_force_rtol x P <d>, phi settled to -level_phi_rtol, contact conditions exact.\n\n"
     "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (the state of every\n"
     "level) and <output_dir>/packing.csv (the initial packing).\n\n"
     "Examples:\n"
-    "  build/bin/compact -n_particles 100 -kappa 0.5 -friction 0.2 -output_dir out/compact\n"
-    "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8\n\n"
+    "  build/bin/compact -options_file petsc-options/default.opts     (20 disks, about a minute)\n"
+    "  build/bin/compact -n_particles 64 -kappa 0.5 -friction 0.2 -pressures 1e-4,1e-3 -output_dir out/c64\n"
+    "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8   (1500 disks: not yet practical)\n\n"
     "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
-    "each Newton iteration with the numbers of closed and sliding contacts.\n\n";
+    "each Newton iteration with the numbers of closed and sliding contacts, -ptc_monitor each\n"
+    "pseudo-time step (residual by block, largest unbalanced force and where it acts).\n\n";
 
 #include <petscsnes.h>
 
+#include <algorithm>
 #include <cmath>
 #include <exception>
 #include <string>
@@ -46,6 +51,7 @@ struct CompactOptions {
   std::string output_dir;
   PetscBool write_hdf5 = PETSC_TRUE;
   PetscBool settle_frictionless = PETSC_TRUE;
+  PetscBool settle_rigid = PETSC_TRUE;
 };
 
 PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
@@ -60,6 +66,10 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
                             o->mesh_triangles, &o->mesh_triangles, nullptr));
   PetscCall(PetscOptionsBool("-write_hdf5", "write the state of every level to levels.h5", "", o->write_hdf5,
                              &o->write_hdf5, nullptr));
+  PetscCall(PetscOptionsBool("-settle_rigid",
+                             "start from the exact frictionless equilibrium of the all-rigid packing at the first pressure "
+                             "(then the deformable disks only deform, instead of rearranging the soft-jammed state)",
+                             "", o->settle_rigid, &o->settle_rigid, nullptr));
   PetscCall(PetscOptionsBool("-settle_frictionless",
                              "solve the first pressure level without friction (friction on from the second level)", "",
                              o->settle_frictionless, &o->settle_frictionless, nullptr));
@@ -127,21 +137,34 @@ PetscErrorCode Run(MPI_Comm comm) {
   }
   PetscCall(PetscLogStagePop());
   const Coordination z0 = coordination(packing, contact_network(packing, 0.0), 3);
+  const double phi0 = packing_fraction(packing);
+  // The soft-jammed packing has tiny overlaps and gaps; settling it with
+  // deformable disks is a slow, nonsmooth rearrangement, while the all-rigid
+  // frictionless packing settles in a few Newton iterations (forces only).
+  // Its equilibrium at the first pressure is the starting geometry.
+  if (opts.settle_rigid && opts.kappa > 0.0) {
+    ProblemParameters rigid_params = params;
+    rigid_params.friction = 0.0;
+    CompactionProblem rigid(comm);
+    PetscCall(rigid.SetParameters(rigid_params));
+    DiskPacking all_rigid = packing;
+    std::fill(all_rigid.deformable.begin(), all_rigid.deformable.end(), 0);
+    rigid.AddPacking(all_rigid, unit_mesh);
+    double step = -1.0;
+    LevelReport rep;
+    PetscCall(AdvanceToPressure(rigid, load, opts.pressures[0] * params.young, &step, &rep));
+    for (int i = 0; i < packing.size(); ++i) {
+      double x[2];
+      rigid.RigidPosition(i, x, nullptr);
+      packing.x[i] = x[0], packing.y[i] = x[1];
+    }
+    std::copy(rigid.Walls(), rigid.Walls() + 4, packing.walls);
+    PetscCall(PetscPrintf(comm, "  rigid settling at P/E = %g: phi = %.5f, %" PetscInt_FMT " Newton iterations, %.2f s\n",
+                          opts.pressures[0], rigid.Summary().packing_fraction, rep.newton_its, rep.seconds));
+  }
   CompactionProblem problem(comm);
   PetscCall(problem.SetParameters(params));
-  int n_deformable = 0;
-  for (int i = 0; i < packing.size(); ++i) {
-    if (packing.deformable[i]) {
-      DiskMesh mesh = unit_mesh;
-      mesh.radius = packing.radius[i];
-      for (double &x : mesh.X) x *= packing.radius[i];
-      problem.AddDeformableBody(mesh, packing.x[i], packing.y[i]);
-      ++n_deformable;
-    } else {
-      problem.AddRigidBody(packing.x[i], packing.y[i], packing.radius[i]);
-    }
-  }
-  problem.SetWalls(packing.walls);
+  const int n_deformable = problem.AddPacking(packing, unit_mesh);
   PetscCall(WritePackingCsv(comm, opts.output_dir + "/packing.csv", packing));
   PetscCall(PetscPrintf(comm,
                         "compact: %d particles (%d deformable, %d triangles each; %d rigid), kappa = %g, friction = %g,"
@@ -150,7 +173,7 @@ PetscErrorCode Run(MPI_Comm comm) {
                         " (%.3f with wall contacts counted twice), rattlers %.1f %%\n",
                         packing.size(), n_deformable, unit_mesh.num_cells(), packing.size() - n_deformable,
                         (double)opts.kappa, params.friction, params.young, params.poisson, (int)opts.seed,
-                        packing_fraction(packing), z0.non_rattlers ? 2.0 * z0.pair_contacts / z0.non_rattlers : 0.0, z0.z_mirror,
+                        phi0, z0.non_rattlers ? 2.0 * z0.pair_contacts / z0.non_rattlers : 0.0, z0.z_mirror,
                         100.0 * z0.rattler_fraction));
 
   // 3. Levels: solve, measure, write.
@@ -167,7 +190,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(RemoveFile(comm, h5));
   PetscCall(PetscPrintf(comm, "  %9s %8s %6s %6s %10s %8s %7s %6s %6s %8s\n", "P/E", "phi", "Z", "Z_nr", "P_sig/P",
                         "K/E", "slide", "newton", "steps", "seconds"));
-  double step = -1.0, prev_phi = packing_fraction(packing), prev_P = 0.0;
+  double step = -1.0, prev_phi = phi0, prev_P = 0.0;
   for (size_t level = 0; level < opts.pressures.size(); ++level) {
     const double P_over_E = opts.pressures[level], P = P_over_E * params.young;
     LevelReport rep;

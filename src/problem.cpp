@@ -161,6 +161,23 @@ int CompactionProblem::AddRigidBody(double cx, double cy, double radius) {
 
 void CompactionProblem::SetWalls(const double w[4]) { std::copy(w, w + 4, w_); }
 
+int CompactionProblem::AddPacking(const DiskPacking &packing, const DiskMesh &unit_mesh) {
+  int n_deformable = 0;
+  for (int i = 0; i < packing.size(); ++i) {
+    if (packing.deformable[i]) {
+      DiskMesh mesh = unit_mesh;
+      mesh.radius = packing.radius[i];
+      for (double &x : mesh.X) x *= packing.radius[i];
+      AddDeformableBody(mesh, packing.x[i], packing.y[i]);
+      ++n_deformable;
+    } else {
+      AddRigidBody(packing.x[i], packing.y[i], packing.radius[i]);
+    }
+  }
+  SetWalls(packing.walls);
+  return n_deformable;
+}
+
 void CompactionProblem::NodePosition(int b, int a, double x[2]) const {
   const DeformableBody &body = bodies_[b];
   const PetscInt d = body.dof_offset + 2 * a;
@@ -1129,7 +1146,7 @@ std::vector<ContactForce> CompactionProblem::ContactForces() const {
         f.point[horizontal ? 0 : 1] -= sign * rigid_[cc.body].radius;
       }
     }
-    f.state = active_now_.size() == candidates_.size() ? active_now_[c] : (lambda_[c] > 0.0 ? kClosed : kOpen);
+    f.state = active_now_.size() == candidates_.size() ? static_cast<int>(active_now_[c]) : (lambda_[c] > 0.0 ? static_cast<int>(kClosed) : static_cast<int>(kOpen));
     out.push_back(f);
   }
   return out;

@@ -243,23 +243,10 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
   p.level_force_rtol = 1e-4;
   CompactionProblem problem(PETSC_COMM_WORLD);
   ASSERT_PETSC(problem.SetParameters(p));
-  const DiskMesh unit = make_disk_mesh(1.0, 92, 2);
-  int n_def = 0, n_rigid = 0;
-  for (int i = 0; i < packing.size(); ++i) {
-    if (packing.deformable[i]) {
-      DiskMesh m = unit;
-      m.radius = packing.radius[i];
-      for (double &x : m.X) x *= packing.radius[i];
-      problem.AddDeformableBody(m, packing.x[i], packing.y[i]);
-      ++n_def;
-    } else {
-      problem.AddRigidBody(packing.x[i], packing.y[i], packing.radius[i]);
-      ++n_rigid;
-    }
-  }
+  const int n_def = problem.AddPacking(packing, make_disk_mesh(1.0, 92, 2));
+  const int n_rigid = problem.NumParticles() - n_def;
   ASSERT_GT(n_def, 0);
   ASSERT_GT(n_rigid, 0);
-  problem.SetWalls(packing.walls);
   LoadControlParameters load;
   double step = -1.0;
   int level = 0;

@@ -61,6 +61,7 @@
 #include "deformix/contact_law.hpp"
 #include "deformix/disk_mesh.hpp"
 #include "deformix/hyperelastic_element.hpp"
+#include "deformix/packing.hpp"
 #include "deformix/pair_kinematics.hpp"
 #include "deformix/wall_box.hpp"
 
@@ -198,6 +199,10 @@ class CompactionProblem {
   int AddDeformableBody(const DiskMesh &mesh, double cx, double cy);
   // Adds a rigid disk; returns its index.
   int AddRigidBody(double cx, double cy, double radius);
+  // Adds every disk of a packing (deformable ones as copies of unit_mesh, a
+  // mesh of the unit-radius disk, scaled to their radius) and its walls;
+  // returns the number of deformable disks.
+  int AddPacking(const DiskPacking &packing, const DiskMesh &unit_mesh);
   // Places the walls (x_left, x_right, y_bottom, y_top).
   void SetWalls(const double w[4]);
 
