@@ -1,0 +1,82 @@
+#!/usr/bin/python3
+"""Stability runs of the mixture driver `compact` (registered in CTest).
+
+    compact_tests.py --driver BIN --workdir DIR CASE
+
+Cases
+  friction-to-half  50 disks, kappa = 0.5, friction 0.8, P/E from 1e-4 up to 0.5
+  jump              the same scene asked for P/E = 0.1 in a single level
+
+Every row of curve.csv must satisfy: all requested levels present, phi rising
+with P, no penetration beyond 1e-9 <d>, the unbalanced force within the level
+criterion (force_residual_over_Pd <= 1e-4), the contact stress equal to the
+imposed pressure to 2e-3 (the virial check at that force tolerance),
+Z_no_rattlers >= Z > 0, no negative bulk modulus.
+"""
+import argparse
+import csv
+import os
+import shutil
+import subprocess
+import sys
+
+failures = []
+
+
+def check(cond, message):
+    print(("  ok    " if cond else "  FAIL  ") + message)
+    if not cond:
+        failures.append(message)
+    return cond
+
+
+def run_compact(driver, out, pressures, timeout):
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = [driver, "-n_particles", "50", "-kappa", "0.5", "-friction", "0.8", "-seed", "1", "-pressures",
+           ",".join(str(p) for p in pressures), "-output_dir", out, "-write_hdf5", "false"]
+    print("$ " + " ".join(cmd))
+    p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=timeout)
+    print(p.stdout)
+    check(p.returncode == 0, f"exit code 0 (got {p.returncode})")
+    path = os.path.join(out, "curve.csv")
+    if not check(os.path.exists(path), "curve.csv written"):
+        return []
+    with open(path, newline="") as f:
+        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    check([r["P_over_E"] for r in rows] == pressures, f"levels {[r['P_over_E'] for r in rows]} == {pressures}")
+    for i, r in enumerate(rows):
+        P = r["P_over_E"]
+        tag = f"P/E = {P:g}"
+        if i > 0:
+            check(r["phi"] > rows[i - 1]["phi"], f"{tag}: phi rises ({r['phi']:.5f})")
+        check(r["max_penetration"] <= 1e-9, f"{tag}: max penetration {r['max_penetration']:.2e} <= 1e-9")
+        check(r["force_residual_over_Pd"] <= 1e-4, f"{tag}: unbalanced force {r['force_residual_over_Pd']:.2e} P<d> <= 1e-4")
+        check(abs(r["P_sigma_over_E"] / P - 1.0) <= 2e-3, f"{tag}: P_sigma / P = {r['P_sigma_over_E'] / P:.6f}")
+        check(0.0 < r["Z"] <= r["Z_no_rattlers"], f"{tag}: 0 < Z = {r['Z']:.3f} <= Z_nr = {r['Z_no_rattlers']:.3f}")
+        check(r["K_over_E"] > 0.0, f"{tag}: K/E = {r['K_over_E']:.3g} > 0")
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--driver", required=True)
+    ap.add_argument("--workdir", required=True)
+    ap.add_argument("case", choices=["friction-to-half", "jump"])
+    a = ap.parse_args()
+    os.makedirs(a.workdir, exist_ok=True)
+    if a.case == "friction-to-half":
+        rows = run_compact(a.driver, os.path.join(a.workdir, "stepped"),
+                           [1e-4, 1e-3, 0.01, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5], timeout=900)
+        if rows:
+            check(rows[-1]["phi"] > 0.9, f"phi at P/E = 0.5 is {rows[-1]['phi']:.4f} > 0.9 (deformable half compacts)")
+            check(any(r["sliding_contacts"] > 0 for r in rows), "friction: some contacts slide")
+    else:
+        rows = run_compact(a.driver, os.path.join(a.workdir, "jump"), [0.1], timeout=900)
+        if rows:
+            check(rows[0]["cuts"] >= 0 and rows[0]["substeps"] >= 1, f"sub-steps {rows[0]['substeps']:.0f}, cuts {rows[0]['cuts']:.0f}")
+    print("FAILED: %d check(s)" % len(failures) if failures else "all checks passed")
+    sys.exit(1 if failures else 0)
+
+
+if __name__ == "__main__":
+    main()
