@@ -698,7 +698,6 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
   if (m > cap) {
     PetscCall(VecScale(Y, cap / m));
     *changed = PETSC_TRUE;
-    ++p->limited_steps_;
   }
   PetscFunctionReturn(0);
 }
@@ -828,20 +827,6 @@ PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force) const {
       if (where >= r.dof_offset && where < r.dof_offset + RigidDofs())
         what = "rigid particle " + std::to_string(r.particle) + " dof " + std::to_string(where - r.dof_offset);
     PetscCall(PetscPrintf(PETSC_COMM_SELF, "    largest force %.3e on %s\n", m, what.c_str()));
-    if (getenv("DEFORMIX_DEBUG_CONTACTS")) {
-      std::vector<double> zf(n_total_);
-      Pack(zf.data());
-      for (size_t c = 0; c < candidates_.size(); ++c) {
-        LocalContact lc;
-        ContactGeometry(candidates_[c], zf.data(), &lc);
-        bool touches = false;
-        for (int a = 0; a < lc.k.ndof; ++a) touches |= lc.dofs[a] == where || lc.dofs[a] == (where ^ 1);
-        if (touches)
-          PetscCall(PetscPrintf(PETSC_COMM_SELF, "      candidate type %d body %d point %d master %d seg %d gap %.3e lambda %.3e beyond %d n (%.3f %.3f)\n",
-                                (int)candidates_[c].type, candidates_[c].body, candidates_[c].point, candidates_[c].master,
-                                candidates_[c].segment, lc.k.gap, lambda_[c], lc.beyond, lc.k.normal[0], lc.k.normal[1]));
-      }
-    }
   }
   PetscCallMPI(MPI_Allreduce(&m, force, 1, MPI_DOUBLE, MPI_MAX, comm_));
   PetscFunctionReturn(0);

@@ -22,8 +22,9 @@
 // Contact pairs (pair_kinematics.hpp, wall_box.hpp): a boundary point of a
 // deformable disk against a wall, a rigid disk against a wall, rigid-rigid,
 // rigid disk against a boundary node of a deformable disk, and a boundary
-// node of one deformable disk against a boundary segment of another. Walls
-// are frictionless.
+// node of one deformable disk against the boundary of another (patch_node:
+// five master nodes, so the contact may slide over a few segments inside one
+// solve with a continuous gap). Walls are frictionless.
 //
 // Singular modes. Rattlers, the free rotation of frictionless disks and the
 // translation of the whole assembly (walls + bodies) make the tangent
@@ -43,6 +44,14 @@
 // triangles) from run to run. With -constrain_rotation the mean rotation of
 // each such body is fixed by a Lagrange multiplier (a torque) that is zero
 // at the symmetric equilibrium of the single-particle test, and is reported.
+//
+// Packings (ptc_move > 0): pseudo-transient continuation. Each inner SNES
+// solve adds rho D (z - z_anchor) to the body and wall rows, with rho =
+// |F|_inf / (ptc_move <d>) from the unbalanced force F of the previous
+// pseudo-time step, and the anchor moves to each solution; rho vanishes with
+// F. A solve is accepted at exact equilibrium (|R| <= atol) or, with
+// level_force_rtol > 0, by the paper's criterion (|F|_inf <= level_force_rtol
+// P <d>, phi settled to level_phi_rtol, contact rows exact).
 //
 // Newton stops only when |R| is below tolerance AND the set of open /
 // sticking / sliding contacts did not change in the last iteration
@@ -341,9 +350,7 @@ class CompactionProblem {
   std::vector<PetscScalar> coo_values_;
   NcpFunction ncp_now_ = NcpFunction::Min;  // NCP function of the current inner solve (see Solve)
   PetscBool monitor_outer_ = PETSC_FALSE;  // -ptc_monitor: one line per pseudo-time step
-  long limited_steps_ = 0;
   int layouts_created_ = 0;         // SetUpLayout calls (symbolic factorizations)
-  PetscInt coo_entries_ = 0;          // Newton steps shortened by newton_max_move (diagnostics)
 };
 
 }  // namespace deformix
