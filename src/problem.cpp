@@ -58,6 +58,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "", constrain_rotation, &constrain_rotation, nullptr));
   PetscCall(PetscOptionsBool("-secant_predictor", "start each increment from the secant extrapolation of the last two states",
                              "", secant_predictor, &secant_predictor, nullptr));
+  PetscCall(PetscOptionsInt("-ptc_max_steps", "pseudo-time steps per sub-step before it counts as failed (the load step is then cut)",
+                            "", ptc_max_steps, &ptc_max_steps, nullptr));
   PetscCall(PetscOptionsReal("-level_force_rtol",
                              "accept a level when the largest unbalanced force is below this x P <d> and phi has settled "
                              "(with -ptc_move; 0: only exact equilibrium, |R| below the absolute tolerance)",
@@ -80,6 +82,7 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCheck(ncp_scale > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_ncp_scale %g must be positive", ncp_scale);
   PetscCheck(prox_eta >= 0.0, comm, PETSC_ERR_USER_INPUT, "-prox_eta %g must be >= 0", prox_eta);
   PetscCheck(ptc_move >= 0.0 && ptc_move <= 1.0, comm, PETSC_ERR_USER_INPUT, "-ptc_move %g must be in [0, 1]", ptc_move);
+  PetscCheck(ptc_max_steps >= 1, comm, PETSC_ERR_USER_INPUT, "-ptc_max_steps %" PetscInt_FMT " must be >= 1", ptc_max_steps);
   PetscCheck(level_force_rtol >= 0.0 && level_force_rtol < 1.0, comm, PETSC_ERR_USER_INPUT,
              "-level_force_rtol %g must be in [0, 1)", level_force_rtol);
   PetscCheck(level_phi_rtol > 0.0, comm, PETSC_ERR_USER_INPUT, "-level_phi_rtol %g must be positive", level_phi_rtol);
@@ -922,7 +925,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   const double rho_floor = params_.prox_eta * params_.young;
   const bool ptc = params_.ptc_move > 0.0;
   double move = params_.ptc_move;
-  const int max_outer = 300;
+  const int max_outer = static_cast<int>(params_.ptc_max_steps);
   int failures = 0;  // failed inner solves in a row
   double phi_last = -1.0;
   double force_residual = 0.0;

@@ -84,6 +84,7 @@ struct ProblemParameters {
   double ncp_scale = 1.0;        // c_n = c_t = ncp_scale * E
   double prox_eta = 1e-8;        // smallest rho / E
   double ptc_move = 0.0;         // pseudo-transient continuation: move per pseudo-time step / <d> (0: plain Newton)
+  PetscInt ptc_max_steps = 300;  // pseudo-time steps per sub-step before it counts as failed
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
