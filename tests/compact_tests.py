@@ -20,14 +20,8 @@ import shutil
 import subprocess
 import sys
 
-failures = []
-
-
-def check(cond, message):
-    print(("  ok    " if cond else "  FAIL  ") + message)
-    if not cond:
-        failures.append(message)
-    return cond
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from driver_tests import check, failures  # noqa: E402  (the same check/report helpers)
 
 
 def run_compact(driver, out, pressures, timeout):
