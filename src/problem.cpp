@@ -664,9 +664,8 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
   // penetration (an overshoot of the Newton model, which has them open):
   // shorten the step so that they just touch, but never below 1/10.
   {
-    Vec yall;
+    Vec yall = p->yall_;
     const PetscScalar *xa, *yv;
-    PetscCall(VecDuplicate(p->zall_, &yall));
     PetscCall(VecScatterBegin(p->to_all_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
     PetscCall(VecScatterEnd(p->to_all_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
     PetscCall(VecGetArrayRead(p->zall_, &xa));  // the current iterate (gathered by the last residual)
@@ -684,7 +683,6 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
     }
     PetscCall(VecRestoreArrayRead(yall, &yv));
     PetscCall(VecRestoreArrayRead(p->zall_, &xa));
-    PetscCall(VecDestroy(&yall));
     alpha = std::max(alpha, 0.1);
     if (alpha < 1.0) {
       PetscCall(VecScale(Y, alpha));
@@ -712,6 +710,7 @@ PetscErrorCode CompactionProblem::DestroySolver() {
   PetscCall(VecDestroy(&z_));
   PetscCall(VecDestroy(&r_));
   PetscCall(VecDestroy(&zall_));
+  PetscCall(VecDestroy(&yall_));
   PetscCall(VecScatterDestroy(&to_all_));
   n_total_ = -1;
   PetscFunctionReturn(0);
@@ -752,6 +751,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscCall(VecCreateMPI(comm_, n_local, n_total_, &z_));
   PetscCall(VecDuplicate(z_, &r_));
   PetscCall(VecScatterCreateToAll(z_, &to_all_, &zall_));
+  PetscCall(VecDuplicate(zall_, &yall_));
 
   std::vector<PetscInt> ci, cj;
   PetscCall(Assemble(nullptr, nullptr, &ci, &cj, nullptr, nullptr, nullptr));

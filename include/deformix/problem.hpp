@@ -339,6 +339,7 @@ class CompactionProblem {
   // Solver objects for the current layout.
   PetscInt n_total_ = -1;
   Vec z_ = nullptr, r_ = nullptr, zall_ = nullptr;
+  Vec yall_ = nullptr;               // replicated Newton step (LimitStep), allocated with the layout
   VecScatter to_all_ = nullptr;
   Mat J_ = nullptr;
   SNES snes_ = nullptr;
