@@ -307,7 +307,7 @@ PetscErrorCode CompactionProblem::RefreshCandidates() {
 
 // ---------------------------------------------------------------------------
 // Kinematics of one candidate: gap, slip and derivatives on its global unknowns.
-void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc) const {
+void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc, bool hessians) const {
   const double *z0 = u_start_.empty() ? z : u_start_.data();  // slip reference: the start of the step
   double q[PairKinematics::kMaxDofs] = {}, q0[PairKinematics::kMaxDofs] = {};
   int nq = 0;
@@ -385,10 +385,11 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
     case ContactType::NodeSegment: {
       const DiskMesh &m = bodies_[c.master].mesh;
       const int nb = static_cast<int>(m.boundary.size());
-      // The master boundary around its node `segment`: five nodes, four segments.
+      // The master boundary around its node `segment`: five nodes, the smooth
+      // master curve on the two segments around it.
       for (int j = -2; j <= 2; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
       add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
-      lc->k = patch_node(q, q0, &lc->beyond);
+      lc->k = curve_node(q, q0, hessians, &lc->beyond);
       lc->slave_xy = 10;
       break;
     }
@@ -515,11 +516,12 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   const double dual_reg = params_.prox_eta;
   LocalContact lc;
   for (size_t c = 0; c < candidates_.size(); ++c) {
-    ContactGeometry(candidates_[c], z, &lc);
-    const PairKinematics &k = lc.k;
-    const int nd = k.ndof;
     const PetscInt ln_dof = lam_off + static_cast<PetscInt>(c), lt_dof = tangential_index_[c];
     const double lam_n = z[ln_dof], lam_t = lt_dof >= 0 ? z[lt_dof] : 0.0;
+    // Second derivatives enter the matrix only through the multipliers.
+    ContactGeometry(candidates_[c], z, &lc, values && (lam_n != 0.0 || lam_t != 0.0));
+    const PairKinematics &k = lc.k;
+    const int nd = k.ndof;
     const NormalNcp ncp = normal_ncp(ncp_now_, lam_n, k.gap, c_n);
     TangentialNcp tan;
     if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t);

@@ -25,20 +25,21 @@ const double kPi = std::acos(-1.0);
 
 constexpr int kMax = PairKinematics::kMaxDofs;
 
-enum class Pair { RigidRigid, RigidNode, SegmentNode, WindowNode, PatchNode };
+enum class Pair { RigidRigid, RigidNode, SegmentNode, WindowNode, PatchNode, CurveNode };
 
 struct Config {
   Pair type;
   double q[kMax] = {};
   double q0[kMax] = {};
   double rA = 0.0, rB = 0.0;
-  int ndof() const { return type == Pair::RigidNode ? 5 : type == Pair::WindowNode ? 8 : type == Pair::PatchNode ? 12 : 6; }
+  int ndof() const { return type == Pair::RigidNode ? 5 : type == Pair::WindowNode ? 8 : (type == Pair::PatchNode || type == Pair::CurveNode) ? 12 : 6; }
   PairKinematics eval(const double *x) const {
     switch (type) {
       case Pair::RigidRigid: return rigid_rigid(x, q0, rA, rB);
       case Pair::RigidNode: return rigid_node(x, q0, rA);
       case Pair::WindowNode: return window_node(x, q0);
       case Pair::PatchNode: return patch_node(x, q0);
+      case Pair::CurveNode: return curve_node(x, q0);
       default: return segment_node(x, q0);
     }
   }
@@ -1228,4 +1229,29 @@ TEST(PatchNode, BeyondFlagAtThePatchEnds) {
   EXPECT_GT(flagged[0], 0);
   EXPECT_GT(flagged[1], 0);
   EXPECT_GT(flagged[2], 0);
+}
+
+// ---------------------------------------------------------------------------
+// curve_node: node against the C1 Catmull-Rom curve through five master nodes.
+TEST(CurveNode, FiniteDifferences) {
+  std::mt19937 rng(101);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  FdErrors worst;
+  for (int trial = 0; trial < 60; ++trial) {
+    Config c = patch_config(0.95 * U(rng), 0.03 + 0.04 * U(rng), rng);
+    c.type = Pair::CurveNode;
+    int beyond = 7;
+    const PairKinematics k = curve_node(c.q, c.q0, true, &beyond);
+    ASSERT_EQ(k.ndof, 12);
+    ASSERT_EQ(beyond, 0);
+    const FdErrors e = fd_errors(c);
+    EXPECT_LT(e.dgap, 1e-6);
+    EXPECT_LT(e.dslip, 1e-6);
+    EXPECT_LT(e.d2gap, 1e-6);
+    EXPECT_LT(e.d2slip, 1e-6);
+    worst.dgap = std::max(worst.dgap, e.dgap), worst.dslip = std::max(worst.dslip, e.dslip);
+    worst.d2gap = std::max(worst.d2gap, e.d2gap), worst.d2slip = std::max(worst.d2slip, e.d2slip);
+  }
+  std::printf("  curve: max rel FD error dgap %.2e dslip %.2e d2gap %.2e d2slip %.2e\n", worst.dgap, worst.dslip,
+              worst.d2gap, worst.d2slip);
 }

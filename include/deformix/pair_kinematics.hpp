@@ -126,5 +126,25 @@ PairKinematics window_node(const double q[8], const double q0[8], int *beyond = 
 // that far inside one Newton solve without a change of sparsity pattern.
 // *beyond = -1 / +1 when the closest point lies beyond m1 / m3 (re-centre).
 PairKinematics patch_node(const double q[12], const double q0[12], int *beyond = nullptr);
+// q = (m0, m1, m2, m3, m4, p) as for patch_node: node p against the smooth
+// (C1) master curve through the five nodes, the uniform Catmull-Rom spline,
+// on its two segments m1 -> m2 and m2 -> m3 that the five nodes define
+// (src/curve_kinematics.cpp). The closest point t* on the curve gives
+//   g = (p - x(t*)) . n,  n = right normal of the curve tangent (outward),
+//   s = tau . [(p - p0) - sum_i N_i(t*) (m_i - m0_i)]   (tau = x'/|x'|, N_i the
+//       spline's basis functions: the slave's displacement relative to the
+//       master's material point, as for segment_node).
+// Gap, normal and slip are continuous (C1 in q) wherever the closest point
+// is unique, also across the master nodes: no vertex features, so a slave
+// node pressed onto a master node has a smooth equilibrium (with the
+// polyline master, patch_node, Newton cycles between the two segments).
+// On equally spaced collinear master nodes the curve is the straight line.
+// Second derivatives (d2gap, d2slip) only if `hessians` (exact, by forward
+// automatic differentiation; they cost about 20 times the rest).
+// *beyond = -1 / +1 when the closest point lies before m1 / after m3 (the
+// curve is then the extrapolated end segment: re-centre the patch).
+// Degenerate input (collapsed tangent, or no closest point: a node far on
+// the concave side) gives a zero normal and zero derivatives.
+PairKinematics curve_node(const double q[12], const double q0[12], bool hessians = true, int *beyond = nullptr);
 
 }  // namespace deformix

@@ -294,7 +294,7 @@ class CompactionProblem {
     int slave_xy = 0;      // local index of the slave's x unknown (force on the slave)
     int beyond = 0;        // node-segment: the closest point left the pair's window (window_node)
   };
-  void ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc) const;
+  void ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc, bool hessians = false) const;
   PetscErrorCode SetUpLayout();      // sizes, Vec/Mat/SNES for the current candidate set
   PetscErrorCode DestroySolver();
   PetscErrorCode Gather(Vec z);      // z -> replicated zall_ array
