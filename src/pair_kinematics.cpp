@@ -42,19 +42,7 @@
 //             + xi d2gamma/de2 - d2rho/de2,
 //   dgamma/de = (n . e0) n / l,  d2gamma/de2 = -[(e0.n)(tau n^T + n tau^T) + (e0.tau) n n^T] / l^2,
 //   and rho likewise with r0.
-//
-// Window-node (a -> v -> b, node p; see the header for the feature choice).
-// A segment feature is segment_node on (a, v, p) or (v, b, p), copied into
-// the 8 unknowns. The vertex feature is the rigid-node pair with r_A = 0 and
-// the master's centre at v: with e = p - v, L = |e|, n = e / L, t = J n and
-// e0 = p0 - v0, s = t . (e - e0) = -t . e0 = c . n with c = -J^T e0, so
-//   dg/de = n,                     d2g/de2 = t t^T / L     (= (I - n n^T) / L),
-//   ds/de = (n . e0) t / L         (= P c / L, P = t t^T, c . t = n . e0),
-//   d2s/de2 = [(t.e0) t t^T - (n.e0)(n t^T + t n^T)] / L^2
-//           (= -(P c n^T + n c^T P + (c.n) P) / L^2, c . n = -t . e0),
-// and the blocks are p: +, v: -, a and b: 0. The feature choice tests
-// xi1 > 1 as (p - v).(v - a) > 0 and xi2 < 0 as (p - v).(b - v) < 0, the
-// same sets as the vertex feature's normal cone.
+
 #include "deformix/pair_kinematics.hpp"
 
 #include <algorithm>
@@ -168,29 +156,6 @@ PairKinematics rigid_pair(const double q[], const double q0[], double rA, double
   return k;
 }
 
-// Copies the result s of a pair whose 2-dof blocks are the blocks
-// block[0 .. s.ndof / 2 - 1] of a larger pair into k (k->ndof set by the caller).
-void embed(const PairKinematics &s, const int *block, PairKinematics *k) {
-  const int nd = k->ndof, ns = s.ndof;
-  k->gap = s.gap;
-  k->slip = s.slip;
-  k->normal[0] = s.normal[0];
-  k->normal[1] = s.normal[1];
-  for (int i = 0; i < ns; ++i) {
-    const int I = 2 * block[i / 2] + i % 2;
-    k->dgap[I] = s.dgap[i];
-    k->dslip[I] = s.dslip[i];
-    for (int j = 0; j < ns; ++j) {
-      const int J = 2 * block[j / 2] + j % 2;
-      k->d2gap[I * nd + J] = s.d2gap[i * ns + j];
-      k->d2slip[I * nd + J] = s.d2slip[i * ns + j];
-    }
-  }
-}
-
-inline double norm(V2 a) { return std::hypot(a.x, a.y); }
-inline double cross(V2 a, V2 b) { return a.x * b.y - a.y * b.x; }
-
 }  // namespace
 
 PairKinematics rigid_rigid(const double q[6], const double q0[6], double rA, double rB) {
@@ -262,107 +227,6 @@ PairKinematics segment_node(const double q[6], const double q0[6]) {
     const M2 hess[2][2] = {{zero, Hre}, {transpose(Hre), Hee}};
     scatter(map, k.ndof, grad, hess, k.dslip, k.d2slip);
   }
-  return k;
-}
-
-PairKinematics window_node(const double q[8], const double q0[8], int *beyond) {
-  if (beyond) *beyond = 0;
-  PairKinematics k;
-  k.ndof = 8;
-  // Blocks of q: a at 0, v at 2, b at 4, p at 6.
-  const V2 a{q[0], q[1]}, v{q[2], q[3]}, b{q[4], q[5]}, p{q[6], q[7]};
-  const V2 a0{q0[0], q0[1]}, v0{q0[2], q0[3]}, b0{q0[4], q0[5]}, p0{q0[6], q0[7]};
-  const V2 e1 = v - a, e2 = b - v, w = p - v;
-  const double l1 = norm(e1), l2 = norm(e2);
-  // segment_node's collapsed-segment test on (a, v, p) and (v, b, p).
-  const bool ok1 = l1 > kDegenerateRel * (norm(v0 - a0) + norm(p - a));
-  const bool ok2 = l2 > kDegenerateRel * (norm(b0 - v0) + norm(w));
-
-  // xi1 > 1 <=> w . e1 > 0,  xi2 < 0 <=> w . e2 < 0.
-  const double w1 = dot(w, e1), w2 = dot(w, e2);
-  const bool convex = ok1 && ok2 && cross(e1, e2) > 0.0;
-  if (convex && w1 > 0.0 && w2 < 0.0) {
-    // Vertex feature: the rigid-node pair with r = 0 centred at v.
-    const double L = norm(w);
-    k.gap = L;
-    if (!(L > kDegenerateRel * (l1 + l2 + norm(p0 - v0)))) return k;  // node on the vertex
-    const V2 n = (1.0 / L) * w;
-    const V2 t{-n.y, n.x};
-    const V2 e0 = p0 - v0;
-    const double ne0 = dot(n, e0), te0 = dot(t, e0);
-    k.normal[0] = n.x;
-    k.normal[1] = n.y;
-    k.slip = -te0;
-    // z_0 = e = p - v; blocks v at 2, p at 6.
-    const Scatter map{1, 2, {2, 6, 0}, {{-1.0, 1.0, 0.0}, {0.0, 0.0, 0.0}}};
-    const M2 zero{{{0.0, 0.0}, {0.0, 0.0}}};
-    const V2 gg[2] = {n, {0.0, 0.0}};
-    const M2 hg[2][2] = {{(1.0 / L) * outer(t, t), zero}, {zero, zero}};
-    scatter(map, k.ndof, gg, hg, k.dgap, k.d2gap);
-    const V2 gs[2] = {(ne0 / L) * t, {0.0, 0.0}};
-    const M2 hs[2][2] = {{(1.0 / (L * L)) * (te0 * outer(t, t) - ne0 * sym_outer(n, t)), zero}, {zero, zero}};
-    scatter(map, k.ndof, gs, hs, k.dslip, k.d2slip);
-    return k;
-  }
-
-  // Segment feature.
-  int chosen;  // 1: a-v, 2: v-b
-  if (!ok2) {
-    chosen = 1;  // also when both are collapsed: segment_node's degenerate result
-  } else if (!ok1) {
-    chosen = 2;
-  } else {
-    bool app1 = w1 <= 0.0, app2 = w2 >= 0.0;  // xi1 <= 1, xi2 >= 0
-    if (!app1 && !app2) app1 = app2 = true;
-    if (app1 && app2) {
-      const double g1 = cross(e1, p - a) * (-1.0 / l1);  // (p - a) . right normal of e1
-      const double g2 = cross(e2, w) * (-1.0 / l2);
-      chosen = (convex ? g1 >= g2 : g1 <= g2) ? 1 : 2;
-    } else {
-      chosen = app1 ? 1 : 2;
-    }
-  }
-  static const int kBlocks1[3] = {0, 1, 3}, kBlocks2[3] = {1, 2, 3};
-  const int *blocks = chosen == 1 ? kBlocks1 : kBlocks2;
-  double qs[6], qs0[6];
-  for (int X = 0; X < 3; ++X)
-    for (int i = 0; i < 2; ++i) {
-      qs[2 * X + i] = q[2 * blocks[X] + i];
-      qs0[2 * X + i] = q0[2 * blocks[X] + i];
-    }
-  embed(segment_node(qs, qs0), blocks, &k);
-  if (beyond) {
-    if (chosen == 1 && ok1 && dot(p - a, e1) < 0.0) *beyond = -1;  // xi1 < 0
-    if (chosen == 2 && dot(p - b, e2) > 0.0) *beyond = +1;         // xi2 > 1
-  }
-  return k;
-}
-
-PairKinematics patch_node(const double q[12], const double q0[12], int *beyond) {
-  if (beyond) *beyond = 0;
-  // Closest point of p on the four segments m_s -> m_{s+1} (clamped).
-  const V2 p{q[10], q[11]};
-  int best_vertex = 2;
-  double best = std::numeric_limits<double>::infinity();
-  for (int s = 0; s < 4; ++s) {
-    const V2 a{q[2 * s], q[2 * s + 1]}, b{q[2 * s + 2], q[2 * s + 3]};
-    const V2 e = b - a;
-    const double l2 = dot(e, e);
-    const double xi = l2 > 0.0 ? std::clamp(dot(p - a, e) / l2, 0.0, 1.0) : 0.0;
-    const double d = norm(p - a - xi * e);
-    if (d < best) best = d, best_vertex = s + (xi < 0.5 ? 0 : 1);
-  }
-  // The three-node window around the interior vertex nearest to that point.
-  const int c = std::clamp(best_vertex, 1, 3);
-  const int blocks[4] = {c - 1, c, c + 1, 5};
-  double qw[8], qw0[8];
-  for (int X = 0; X < 4; ++X)
-    for (int i = 0; i < 2; ++i) qw[2 * X + i] = q[2 * blocks[X] + i], qw0[2 * X + i] = q0[2 * blocks[X] + i];
-  int sub_beyond = 0;
-  PairKinematics k;
-  k.ndof = 12;
-  embed(window_node(qw, qw0, &sub_beyond), blocks, &k);
-  if (beyond) *beyond = best_vertex == 0 || (c == 1 && sub_beyond < 0) ? -1 : best_vertex == 4 || (c == 3 && sub_beyond > 0) ? 1 : 0;
   return k;
 }
 
