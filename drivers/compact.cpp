@@ -5,8 +5,8 @@ static const char help[] =
     "Protocol: n_particles rigid disks (diameters in [0.8, 1.2], uniform area fraction per diameter)\n"
     "are packed to the frictionless jammed state phi_0 (soft-disk FIRE compression to vanishing\n"
     "overlap); a fraction kappa of the particle area is turned deformable, homogeneously in space;\n"
-    "the first level settles it into exact contact without friction, then friction is switched on\n"
-    "(-settle_frictionless); each level of -pressures (P/E) is reached quasistatically with\n"
+    "it is settled into exact contact without friction at min(P_1, 1e-4 E), then friction is\n"
+    "switched on (-settle_frictionless); each level of -pressures (P/E) is reached quasistatically with\n"
     "automatic sub-stepping, each level being equilibrium of\n"
     "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
     "solved by semismooth Newton in one PETSc SNES (MUMPS LU) inside pseudo-transient continuation.\n"
@@ -71,7 +71,7 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
                              "(then the deformable disks only deform, instead of rearranging the soft-jammed state)",
                              "", o->settle_rigid, &o->settle_rigid, nullptr));
   PetscCall(PetscOptionsBool("-settle_frictionless",
-                             "settle the first pressure level without friction, then switch friction on and solve it again", "",
+                             "settle the packing without friction at min(first level, 1e-4 E), then switch friction on, solve again and step to the first level", "",
                              o->settle_frictionless, &o->settle_frictionless, nullptr));
   PetscOptionsEnd();
   PetscCheck(o->n_particles >= 1 && o->n_particles <= 200000, comm, PETSC_ERR_USER_INPUT,
@@ -198,26 +198,37 @@ PetscErrorCode Run(MPI_Comm comm) {
     const double P_over_E = opts.pressures[level], P = P_over_E * params.young;
     LevelReport rep;
     PetscCall(PetscLogStagePush(stage_solve));
-    // Protocol: the first level settles the packing into exact contact
-    // without friction (as it was assembled), then friction is switched on
-    // and the same level solved again.
-    const bool settle = level == 0 && opts.settle_frictionless && params.friction > 0.0;
-    problem.SetFrictionActive(!settle);
-    PetscCall(AdvanceToPressure(problem, load, P, &step, &rep));
-    if (settle) {
-      // Friction on, same pressure: the first level is reported with friction.
+    // Protocol: the packing is first settled into exact contact without
+    // friction (as it was assembled) at min(P_1, 1e-4 E), then friction is
+    // switched on, that state solved again, and the load stepped to P_1 with
+    // friction: a large first level is not compacted frictionless.
+    PetscLogDouble t_start, t_end;
+    PetscCall(PetscTime(&t_start));
+    if (level == 0 && opts.settle_frictionless && params.friction > 0.0) {
+      const double P_settle = std::min(P, 1e-4 * params.young);
+      problem.SetFrictionActive(false);
+      PetscCall(AdvanceToPressure(problem, load, P_settle, &step, &rep));
       problem.SetFrictionActive(true);
       SolveReport again;
-      PetscCall(problem.Solve(P, &again));
+      PetscCall(problem.Solve(P_settle, &again));
       PetscCheck(again.converged, comm, PETSC_ERR_NOT_CONVERGED,
                  "P/E = %g: the frictionless settled state did not converge once friction was switched on (%s); "
-                 "try -settle_frictionless false", P_over_E, SNESConvergedReasons[again.reason]);
-      rep.newton_its += again.newton_its;
-      rep.inner_solves += again.inner_solves;
-      rep.layouts += again.layouts;
-      rep.force_residual = again.force_residual;
-      rep.relaxed_substeps += again.relaxed;
+                 "try -settle_frictionless false", P_settle / params.young, SNESConvergedReasons[again.reason]);
+      LevelReport rest;
+      PetscCall(AdvanceToPressure(problem, load, P, &step, &rest));
+      rep.newton_its += again.newton_its + rest.newton_its;
+      rep.inner_solves += again.inner_solves + rest.inner_solves;
+      rep.layouts += again.layouts + rest.layouts;
+      rep.substeps += rest.substeps;
+      rep.cuts += rest.cuts;
+      rep.force_residual = rest.substeps > 0 ? rest.force_residual : again.force_residual;
+      rep.relaxed_substeps += rest.substeps > 0 ? rest.relaxed_substeps : again.relaxed;
+    } else {
+      problem.SetFrictionActive(true);
+      PetscCall(AdvanceToPressure(problem, load, P, &step, &rep));
     }
+    PetscCall(PetscTime(&t_end));
+    rep.seconds = t_end - t_start;
     PetscCall(PetscLogStagePop());
     const PackingObservables o = ComputeObservables(problem);
     const LayoutSizes sizes = problem.Sizes();

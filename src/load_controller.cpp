@@ -13,6 +13,8 @@ PetscErrorCode LoadControlParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsInt("-load_easy_its", "grow the step after sub-steps with at most this many Newton iterations",
                             "", easy_its, &easy_its, nullptr));
   PetscCall(PetscOptionsReal("-load_growth", "step growth factor after an easy sub-step", "", growth, &growth, nullptr));
+  PetscCall(PetscOptionsBool("-load_monitor", "print one line per sub-step (pressure, Newton iterations, pseudo-time steps)",
+                             "", monitor, &monitor, nullptr));
   PetscOptionsEnd();
   PetscCheck(max_cuts >= 0, comm, PETSC_ERR_USER_INPUT, "-load_max_cuts must be >= 0");
   PetscCheck(growth >= 1.0, comm, PETSC_ERR_USER_INPUT, "-load_growth %g must be >= 1", growth);
@@ -42,6 +44,10 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
     report->newton_its += solve.newton_its;
     report->inner_solves += solve.inner_solves;
     report->layouts += solve.layouts;
+    if (params.monitor)
+      PetscCall(PetscPrintf(PETSC_COMM_WORLD, "    sub-step to P = %-10.4g %s: %4" PetscInt_FMT " Newton iterations, %3d pseudo-time steps%s\n",
+                            Pnext, solve.converged ? "converged" : "failed   ", solve.newton_its, solve.inner_solves,
+                            solve.converged ? (solve.relaxed ? " (level criterion)" : "") : ", step halved"));
     if (solve.converged) {
       P = Pnext;
       report->force_residual = solve.force_residual;

@@ -5,7 +5,10 @@
 
 Cases
   friction-to-half  50 disks, kappa = 0.5, friction 0.8, P/E from 1e-4 up to 0.5
-  jump              the same scene asked for P/E = 0.1 in a single level
+  jump              the same scene asked for P/E = 0.1 in a single level (load
+                    stepping from the settled packing inside the level), against
+                    the same scene taken there in 5 levels: the friction path
+                    differs only by the sub-steps, so phi must agree to 5e-3
 
 Every row of curve.csv must satisfy: all requested levels present, phi rising
 with P, no penetration beyond 1e-9 <d>, the unbalanced force within the level
@@ -67,8 +70,13 @@ def main():
             check(rows[-1]["Z_no_rattlers"] > rows[0]["Z_no_rattlers"], "compaction raises the coordination")
     else:
         rows = run_compact(a.driver, os.path.join(a.workdir, "jump"), [0.1], timeout=900)
-        if rows:
-            check(rows[0]["cuts"] >= 0 and rows[0]["substeps"] >= 1, f"sub-steps {rows[0]['substeps']:.0f}, cuts {rows[0]['cuts']:.0f}")
+        ref = run_compact(a.driver, os.path.join(a.workdir, "stepped"), [1e-4, 1e-3, 0.01, 0.05, 0.1], timeout=900)
+        if rows and ref:
+            j, r = rows[0], ref[-1]
+            check(j["substeps"] > 1, f"the jump was sub-stepped ({j['substeps']:.0f} sub-steps, {j['cuts']:.0f} cuts)")
+            check(j["sliding_contacts"] > 0, f"friction is on in the jump ({j['sliding_contacts']:.0f} sliding contacts)")
+            check(abs(j["phi"] - r["phi"]) <= 5e-3,
+                  f"phi after the jump {j['phi']:.5f} vs stepped {r['phi']:.5f} (within 5e-3)")
     print("FAILED: %d check(s)" % len(failures) if failures else "all checks passed")
     sys.exit(1 if failures else 0)
 
