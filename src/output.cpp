@@ -50,12 +50,19 @@ PetscErrorCode RemoveFile(MPI_Comm comm, const std::string &path) {
 
 namespace {
 
+// Creates dataset `name` (rows x cols; 1-D if cols == 1) in `group`, which is
+// collective, and writes `data` into it on the ranks that pass it (nullptr:
+// create only). The data is written with the default, independent transfer.
 herr_t WriteDataset(hid_t group, const char *name, hid_t type, int rows, int cols, const void *data) {
   hsize_t dims[2] = {static_cast<hsize_t>(rows), static_cast<hsize_t>(cols)};
   hid_t space = H5Screate_simple(cols > 1 ? 2 : 1, dims, nullptr);
-  hid_t set = H5Dcreate2(group, name, type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  herr_t st = (set < 0) ? -1 : H5Dwrite(set, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data);
+  // One rank writes every element, so skip the fill with default values.
+  hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+  H5Pset_fill_time(dcpl, H5D_FILL_TIME_NEVER);
+  hid_t set = H5Dcreate2(group, name, type, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+  herr_t st = (set < 0) ? -1 : data ? H5Dwrite(set, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) : 0;
   if (set >= 0) H5Dclose(set);
+  H5Pclose(dcpl);
   H5Sclose(space);
   return st;
 }
@@ -71,51 +78,83 @@ herr_t WriteAttribute(hid_t obj, const char *name, double v) {
 
 }  // namespace
 
+// With parallel HDF5 all ranks open the file through MPI-IO. Everything that
+// touches the file's metadata is collective: opening and closing the file,
+// creating groups and datasets, and writing attributes. All ranks make these
+// calls with the same arguments in the same order, which they can because
+// the state is replicated (every rank knows every shape). The raw data of a
+// dataset is written independently by a single rank: a deformable body's
+// datasets by the owner of its particle, /walls and /rigid by rank 0. A
+// failed write only clears the rank's `ok` flag and never makes it skip the
+// collective calls that follow; the flags are reduced at the end. Without
+// parallel HDF5, rank 0 writes everything alone.
 PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level, double P_over_E,
                               const CompactionProblem &problem) {
   PetscMPIInt rank;
   int ok = 1;
   PetscFunctionBeginUser;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  if (rank == 0) {
-    hid_t file = level == 0 ? H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT)
-                            : H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  // Attribute values must be identical on all ranks: take rank 0's.
+  double attr[2] = {P_over_E, problem.Summary().packing_fraction};
+  PetscCallMPI(MPI_Bcast(attr, 2, MPI_DOUBLE, 0, comm));
+  hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+#ifdef H5_HAVE_PARALLEL
+  H5Pset_fapl_mpio(fapl, comm, MPI_INFO_NULL);
+  const bool opens = true;
+  const std::vector<int> &owner = problem.ParticleOwners();  // empty on one rank: all rank 0's
+#else
+  const bool opens = rank == 0;
+  const std::vector<int> owner;  // rank 0 writes everything
+#endif
+  if (opens) {
+    hid_t file = level == 0 ? H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl)
+                            : H5Fopen(path.c_str(), H5F_ACC_RDWR, fapl);
     ok = file >= 0;
     if (ok) {
       char name[64];
       std::snprintf(name, sizeof(name), "level_%04d", level);
       hid_t g = H5Gcreate2(file, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-      const StateSummary s = problem.Summary();
-      ok = g >= 0 && WriteAttribute(g, "P_over_E", P_over_E) >= 0 &&
-           WriteAttribute(g, "packing_fraction", s.packing_fraction) >= 0 &&
-           WriteDataset(g, "walls", H5T_NATIVE_DOUBLE, 4, 1, problem.Walls()) >= 0;
-      for (int b = 0; ok && b < static_cast<int>(problem.Bodies().size()); ++b) {
-        const DeformableBody &body = problem.Bodies()[b];
-        const int nn = body.mesh.num_nodes(), nc = body.mesh.num_cells(), nen = body.mesh.nodes_per_cell();
-        std::vector<double> x(2 * nn);
-        for (int a = 0; a < nn; ++a) problem.NodePosition(b, a, &x[2 * a]);
-        const std::vector<double> J = problem.CellAreaRatio(b);
-        std::snprintf(name, sizeof(name), "body_%d", b);
-        hid_t gb = H5Gcreate2(g, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-        ok = gb >= 0 && WriteDataset(gb, "coordinates", H5T_NATIVE_DOUBLE, nn, 2, x.data()) >= 0 &&
-             WriteDataset(gb, "cells", H5T_NATIVE_INT, nc, nen, body.mesh.cells.data()) >= 0 &&
-             WriteDataset(gb, "cell_area_ratio", H5T_NATIVE_DOUBLE, nc, 1, J.data()) >= 0;
-        if (gb >= 0) H5Gclose(gb);
-      }
-      const std::vector<RigidBody> &rigid = problem.RigidBodies();
-      if (ok && !rigid.empty()) {
-        std::vector<double> xr(4 * rigid.size());
-        for (size_t r = 0; r < rigid.size(); ++r) {
-          problem.RigidPosition(static_cast<int>(r), &xr[4 * r], &xr[4 * r + 3]);
-          xr[4 * r + 2] = rigid[r].radius;
+      ok = g >= 0 && WriteAttribute(g, "P_over_E", attr[0]) >= 0 &&
+           WriteAttribute(g, "packing_fraction", attr[1]) >= 0;
+      if (g >= 0) {
+        if (WriteDataset(g, "walls", H5T_NATIVE_DOUBLE, 4, 1, rank == 0 ? problem.Walls() : nullptr) < 0) ok = 0;
+        for (int b = 0; b < static_cast<int>(problem.Bodies().size()); ++b) {
+          const DeformableBody &body = problem.Bodies()[b];
+          const bool mine = (owner.empty() ? 0 : owner[body.particle]) == rank;
+          const int nn = body.mesh.num_nodes(), nc = body.mesh.num_cells(), nen = body.mesh.nodes_per_cell();
+          std::vector<double> x, J;
+          if (mine) {
+            x.resize(2 * nn);
+            for (int a = 0; a < nn; ++a) problem.NodePosition(b, a, &x[2 * a]);
+            J = problem.CellAreaRatio(b);
+          }
+          std::snprintf(name, sizeof(name), "body_%d", b);
+          hid_t gb = H5Gcreate2(g, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+          if (gb < 0 ||
+              WriteDataset(gb, "coordinates", H5T_NATIVE_DOUBLE, nn, 2, mine ? x.data() : nullptr) < 0 ||
+              WriteDataset(gb, "cells", H5T_NATIVE_INT, nc, nen, mine ? body.mesh.cells.data() : nullptr) < 0 ||
+              WriteDataset(gb, "cell_area_ratio", H5T_NATIVE_DOUBLE, nc, 1, mine ? J.data() : nullptr) < 0)
+            ok = 0;
+          if (gb >= 0) H5Gclose(gb);
         }
-        ok = WriteDataset(g, "rigid", H5T_NATIVE_DOUBLE, static_cast<int>(rigid.size()), 4, xr.data()) >= 0;
+        const std::vector<RigidBody> &rigid = problem.RigidBodies();
+        if (!rigid.empty()) {
+          std::vector<double> xr(4 * rigid.size());
+          for (size_t r = 0; r < rigid.size(); ++r) {
+            problem.RigidPosition(static_cast<int>(r), &xr[4 * r], &xr[4 * r + 3]);
+            xr[4 * r + 2] = rigid[r].radius;
+          }
+          if (WriteDataset(g, "rigid", H5T_NATIVE_DOUBLE, static_cast<int>(rigid.size()), 4,
+                           rank == 0 ? xr.data() : nullptr) < 0)
+            ok = 0;
+        }
+        H5Gclose(g);
       }
-      if (g >= 0) H5Gclose(g);
-      H5Fclose(file);
+      if (H5Fclose(file) < 0) ok = 0;
     }
   }
-  PetscCallMPI(MPI_Bcast(&ok, 1, MPI_INT, 0, comm));
+  H5Pclose(fapl);
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &ok, 1, MPI_INT, MPI_MIN, comm));
   PetscCheck(ok, comm, PETSC_ERR_FILE_WRITE, "writing level %d to %s failed", level, path.c_str());
   PetscFunctionReturn(0);
 }

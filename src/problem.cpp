@@ -1,4 +1,5 @@
 #include "deformix/problem.hpp"
+#include "deformix/partition.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -71,6 +72,12 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              newton_max_move, &newton_max_move, nullptr));
   PetscCall(PetscOptionsReal("-contact_margin", "contact candidates: gap below margin x mean diameter", "",
                              contact_margin, &contact_margin, nullptr));
+  PetscCall(PetscOptionsReal("-repartition_tol",
+                             "MPI: repartition (METIS) when the edge cut can shrink by this fraction or the load imbalance "
+                             "exceeds 1 + this (< 0: keep the first partition)",
+                             "", repartition_tol, &repartition_tol, nullptr));
+  PetscCall(PetscOptionsBool("-partition_view", "MPI: print the edge cut and load imbalance of every partition", "",
+                             partition_view, &partition_view, nullptr));
   PetscOptionsEnd();
   ncp = ncp_choice == 0 ? NcpFunction::Min : NcpFunction::FischerBurmeister;
   PetscCheck(young > 0.0, comm, PETSC_ERR_USER_INPUT, "-E %g: Young's modulus must be positive", young);
@@ -163,6 +170,75 @@ int CompactionProblem::AddRigidBody(double cx, double cy, double radius) {
 }
 
 void CompactionProblem::SetWalls(const double w[4]) { std::copy(w, w + 4, w_); }
+
+int CompactionProblem::CandidateOwner(const ContactCandidate &c) const {
+  const bool rigid_slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid;
+  return ParticleOwner(rigid_slave ? rigid_[c.body].particle : bodies_[c.body].particle);
+}
+
+// METIS partition of the particle graph (partition.hpp): a vertex per
+// particle weighted by its unknowns (body, gauge, and the multipliers of the
+// contacts it is the slave of, which its rank owns), an edge per candidate
+// between two particles. Computed on rank 0 and broadcast.
+PetscErrorCode CompactionProblem::UpdatePartition() {
+  PetscFunctionBeginUser;
+  if (size_ == 1) {
+    particle_owner_.clear();
+    PetscFunctionReturn(0);
+  }
+  const int np = NumParticles();
+  ParticleGraph graph;
+  graph.vertex_weight.assign(np, 0);
+  for (const DeformableBody &b : bodies_)
+    graph.vertex_weight[b.particle] += 2 * b.mesh.num_nodes() + (torque_.empty() ? 0 : 1);
+  for (const RigidBody &r : rigid_) graph.vertex_weight[r.particle] += RigidDofs();
+  for (const ContactCandidate &c : candidates_) {
+    const bool rigid_slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid;
+    const int slave = rigid_slave ? rigid_[c.body].particle : bodies_[c.body].particle;
+    graph.vertex_weight[slave] += HasTangential(c) ? 2 : 1;
+    int master = -1;
+    if (c.type == ContactType::RigidRigid || c.type == ContactType::RigidNode) master = rigid_[c.master].particle;
+    if (c.type == ContactType::NodeSegment) master = bodies_[c.master].particle;
+    if (master >= 0) graph.edges.emplace_back(master, slave);
+  }
+  int adopt = 0;
+  std::vector<int> owner(np, 0);
+  std::string error;
+  if (rank_ == 0) {
+    try {
+      Partition fresh = partition_particles(graph, size_, 1);
+      if (particle_owner_.empty()) {
+        adopt = 1;
+      } else if (params_.repartition_tol >= 0.0) {
+        Partition current;
+        current.parts = size_;
+        current.owner = particle_owner_;
+        evaluate_partition(graph, &current);
+        const double tol = params_.repartition_tol;
+        adopt = (fresh.edge_cut < (1.0 - tol) * current.edge_cut && fresh.imbalance <= std::max(current.imbalance, 1.0 + tol)) ||
+                (current.imbalance > 1.0 + tol && fresh.imbalance < current.imbalance);
+      }
+      if (adopt) {
+        owner = fresh.owner;
+        if (params_.partition_view)
+          PetscCall(PetscPrintf(PETSC_COMM_SELF,
+                                "  partition: %d particles on %d ranks, %zu candidate edges, edge cut %ld, load imbalance %.3f%s\n",
+                                np, size_, graph.edges.size(), fresh.edge_cut, fresh.imbalance,
+                                particle_owner_.empty() ? "" : " (repartitioned)"));
+      }
+    } catch (const std::exception &e) {
+      error = e.what();
+      adopt = -1;
+    }
+  }
+  PetscCallMPI(MPI_Bcast(&adopt, 1, MPI_INT, 0, comm_));
+  PetscCheck(adopt >= 0, comm_, PETSC_ERR_LIB, "partitioning the particles failed: %s", error.c_str());
+  if (adopt) {
+    PetscCallMPI(MPI_Bcast(owner.data(), np, MPI_INT, 0, comm_));
+    particle_owner_ = owner;
+  }
+  PetscFunctionReturn(0);
+}
 
 int CompactionProblem::AddPacking(const DiskPacking &packing, const DiskMesh &unit_mesh) {
   int n_deformable = 0;
@@ -408,15 +484,18 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   const bool values = cv != nullptr;
   const bool need_K = pattern || values;
   const PetscInt wall_off = WallOffset(), rot_off = GaugeOffset(), lam_off = MultiplierOffset();
+  // Entries in natural numbering; the pattern is stored in PETSc numbering.
   auto entry = [&](PetscInt i, PetscInt j, double v) {
     if (i < 0 || j < 0) return;
-    if (pattern) ci->push_back(i), cj->push_back(j);
+    if (pattern) ci->push_back(petsc_of_[i]), cj->push_back(petsc_of_[j]);
     if (values) cv->push_back(v);
   };
   PetscFunctionBeginUser;
   if (inverted) *inverted = false;
   if (active) active->assign(candidates_.size(), kOpen);
-  if (!OwnsEverything()) PetscFunctionReturn(0);
+  // Each rank assembles what it owns: the elements of its deformable disks,
+  // the walls' load (rank 0), the proximal terms of its unknowns, the gauges
+  // of its disks and its contacts (those whose slave it owns).
   // The pattern walk has no state: it uses the reference configuration.
   std::vector<double> zero;
   if (pattern) zero.assign(n_total_, 0.0), z = zero.data();
@@ -425,6 +504,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   std::vector<double> Xe, xe, fe, Ke;
   std::vector<PetscInt> dofs;
   for (const DeformableBody &body : bodies_) {
+    if (ParticleOwner(body.particle) != rank_) continue;
     const DiskMesh &m = body.mesh;
     const int nen = m.nodes_per_cell(), nd = 2 * nen;
     Xe.resize(nd), xe.resize(nd), fe.resize(nd), Ke.resize(nd * nd), dofs.resize(nd);
@@ -459,12 +539,12 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
 
   // Walls: the pressure load P * box area.
   const double *w = z + wall_off;
-  if (F) {
+  if (F && rank_ == 0) {
     double g[4];
     WallBox::pressure_gradient(pressure_, w, g);
     for (int i = 0; i < 4; ++i) F[wall_off + i] += g[i];
   }
-  if (need_K) {
+  if (need_K && rank_ == 0) {
     double H[16];
     WallBox::pressure_hessian(pressure_, H);
     for (int i = 0; i < 4; ++i)
@@ -479,15 +559,18 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
     const std::vector<double> &weight = prox_weight_;
     const double rho = params_.prox_eta * params_.young;
     if (F && rho_anchor_ > 0.0)
-      for (PetscInt i = 0; i < rot_off; ++i) F[i] += rho_anchor_ * weight[i] * (z[i] - anchor_[i]);
+      for (PetscInt i = 0; i < rot_off; ++i)
+        if (OwnsNatural(i)) F[i] += rho_anchor_ * weight[i] * (z[i] - anchor_[i]);
     if (need_K)
-      for (PetscInt i = 0; i < rot_off; ++i) entry(i, i, (rho + rho_anchor_) * weight[i]);
+      for (PetscInt i = 0; i < rot_off; ++i)
+        if (OwnsNatural(i)) entry(i, i, (rho + rho_anchor_) * weight[i]);
   }
 
   // Rotation gauge of frictionless bodies: c_b(u) = G_b . u = mean of X x u = 0,
   // with multiplier mu_b (a torque): R_u -= mu_b G_b, R_mu = (E / R_b) c_b.
   for (size_t b = 0; b < torque_.size(); ++b) {
     const DeformableBody &body = bodies_[b];
+    if (ParticleOwner(body.particle) != rank_) continue;
     const int nn = body.mesh.num_nodes();
     const PetscInt mu_dof = rot_off + static_cast<PetscInt>(b);
     const double mu = z[mu_dof], row_scale = params_.young / body.mesh.radius;
@@ -516,6 +599,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   const double dual_reg = params_.prox_eta;
   LocalContact lc;
   for (size_t c = 0; c < candidates_.size(); ++c) {
+    if (CandidateOwner(candidates_[c]) != rank_) continue;
     const PetscInt ln_dof = lam_off + static_cast<PetscInt>(c), lt_dof = tangential_index_[c];
     const double lam_n = z[ln_dof], lam_t = lt_dof >= 0 ? z[lt_dof] : 0.0;
     // Second derivatives enter the matrix only through the multipliers.
@@ -556,10 +640,11 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
 
 // ---------------------------------------------------------------------------
 // PETSc callbacks.
-PetscErrorCode CompactionProblem::Gather(Vec z) {
+PetscErrorCode CompactionProblem::Gather(Vec z, bool full) {
   PetscFunctionBeginUser;
-  PetscCall(VecScatterBegin(to_all_, z, zall_, INSERT_VALUES, SCATTER_FORWARD));
-  PetscCall(VecScatterEnd(to_all_, z, zall_, INSERT_VALUES, SCATTER_FORWARD));
+  VecScatter sc = full ? to_all_ : to_local_;
+  PetscCall(VecScatterBegin(sc, z, zall_, INSERT_VALUES, SCATTER_FORWARD));
+  PetscCall(VecScatterEnd(sc, z, zall_, INSERT_VALUES, SCATTER_FORWARD));
   PetscFunctionReturn(0);
 }
 
@@ -570,13 +655,21 @@ PetscErrorCode FormFunction(SNES snes, Vec z, Vec F, void *ctx) {
   bool inverted = false;
   PetscFunctionBeginUser;
   PetscCall(PetscLogEventBegin(event_residual, 0, 0, 0, 0));
-  PetscCall(p->Gather(z));
+  PetscCall(p->Gather(z, false));
   PetscCall(VecGetArrayRead(p->zall_, &za));
-  PetscCall(VecSet(F, 0.0));
-  PetscCall(VecGetArray(F, &fa));  // rank 0 owns every row in this version
-  PetscCall(p->Assemble(za, p->OwnsEverything() ? fa : nullptr, nullptr, nullptr, nullptr, &inverted, &p->active_now_));
-  PetscCall(VecRestoreArray(F, &fa));
+  PetscCall(VecSet(p->fall_, 0.0));
+  PetscCall(VecGetArray(p->fall_, &fa));
+  PetscCall(p->Assemble(za, fa, nullptr, nullptr, nullptr, &inverted, &p->active_now_));
+  PetscCall(VecRestoreArray(p->fall_, &fa));
   PetscCall(VecRestoreArrayRead(p->zall_, &za));
+  // Sum every rank's contributions (natural order) into the distributed residual.
+  PetscCall(VecSet(F, 0.0));
+  PetscCall(VecScatterBegin(p->to_local_, p->fall_, F, ADD_VALUES, SCATTER_REVERSE));
+  PetscCall(VecScatterEnd(p->to_local_, p->fall_, F, ADD_VALUES, SCATTER_REVERSE));
+  // Contact states: each rank set those of its contacts (others are kOpen = 0).
+  if (p->size_ > 1 && !p->active_now_.empty())
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, p->active_now_.data(), static_cast<int>(p->active_now_.size()), MPI_CHAR,
+                               MPI_MAX, p->comm_));
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &inverted, 1, MPI_C_BOOL, MPI_LOR, p->comm_));
   p->inverted_ = inverted;
   if (inverted && snes) PetscCall(SNESSetFunctionDomainError(snes));
@@ -589,7 +682,7 @@ PetscErrorCode FormJacobian(SNES, Vec z, Mat J, Mat, void *ctx) {
   const PetscScalar *za;
   PetscFunctionBeginUser;
   PetscCall(PetscLogEventBegin(event_jacobian, 0, 0, 0, 0));
-  PetscCall(p->Gather(z));
+  PetscCall(p->Gather(z, false));
   PetscCall(VecGetArrayRead(p->zall_, &za));
   p->coo_values_.clear();
   PetscCall(p->Assemble(za, nullptr, nullptr, nullptr, &p->coo_values_, nullptr, nullptr));
@@ -640,6 +733,7 @@ PetscErrorCode NewtonMonitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx)
     PetscInt imin;
     PetscCall(VecMin(dz, &imin, &dmin));
     if (-dmin > dmax) dmax = -dmin, imax = imin;
+    imax = p->natural_of_[imax];
     const char *kind = imax < p->WallOffset() ? "body" : imax < p->GaugeOffset() ? "wall" :
                        imax < p->MultiplierOffset() ? "gauge" : imax < p->TangentialOffset() ? "lambda_n" : "lambda_t";
     PetscCall(PetscSNPrintf(where, sizeof(where), "  max|dz| %.2e (%s %" PetscInt_FMT ")", (double)dmax, kind, imax));
@@ -668,13 +762,14 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
   {
     Vec yall = p->yall_;
     const PetscScalar *xa, *yv;
-    PetscCall(VecScatterBegin(p->to_all_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecScatterEnd(p->to_all_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterBegin(p->to_local_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(p->to_local_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
     PetscCall(VecGetArrayRead(p->zall_, &xa));  // the current iterate (gathered by the last residual)
     PetscCall(VecGetArrayRead(yall, &yv));
     const double allow = 1e-3 * p->mean_diameter_;
     double alpha = 1.0;
     for (const ContactCandidate &c : p->candidates_) {
+      if (p->CandidateOwner(c) != p->rank_) continue;
       CompactionProblem::LocalContact lc;
       p->ContactGeometry(c, xa, &lc);
       if (lc.k.gap <= 0.0) continue;
@@ -685,6 +780,7 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
     }
     PetscCall(VecRestoreArrayRead(yall, &yv));
     PetscCall(VecRestoreArrayRead(p->zall_, &xa));
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &alpha, 1, MPI_DOUBLE, MPI_MIN, p->comm_));
     alpha = std::max(alpha, 0.1);
     if (alpha < 1.0) {
       PetscCall(VecScale(Y, alpha));
@@ -694,8 +790,10 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
   PetscCall(VecGetOwnershipRange(Y, &lo, &hi));
   PetscCall(VecGetArrayRead(Y, &ya));
   double m = 0.0;
-  for (PetscInt i = lo; i < std::min<PetscInt>(hi, p->GaugeOffset()); ++i)
-    m = std::max(m, std::abs(ya[i - lo]) * std::sqrt(p->prox_weight_[i]));
+  for (PetscInt i = lo; i < hi; ++i) {
+    const PetscInt n = p->natural_of_[i];
+    if (n < p->GaugeOffset()) m = std::max(m, std::abs(ya[i - lo]) * std::sqrt(p->prox_weight_[n]));
+  }
   PetscCall(VecRestoreArrayRead(Y, &ya));
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &m, 1, MPI_DOUBLE, MPI_MAX, p->comm_));
   if (m > cap) {
@@ -713,7 +811,9 @@ PetscErrorCode CompactionProblem::DestroySolver() {
   PetscCall(VecDestroy(&r_));
   PetscCall(VecDestroy(&zall_));
   PetscCall(VecDestroy(&yall_));
+  PetscCall(VecDestroy(&fall_));
   PetscCall(VecScatterDestroy(&to_all_));
+  PetscCall(VecScatterDestroy(&to_local_));
   n_total_ = -1;
   PetscFunctionReturn(0);
 }
@@ -728,8 +828,10 @@ PetscErrorCode CompactionProblem::CreateGlobalVector(Vec *z) {
 PetscErrorCode CompactionProblem::PackState(Vec z) const {
   PetscScalar *za;
   PetscFunctionBeginUser;
+  std::vector<double> full(n_total_);
+  Pack(full.data());
   PetscCall(VecGetArray(z, &za));
-  if (rank_ == 0) Pack(za);
+  for (PetscInt i = own_lo_; i < own_hi_; ++i) za[i - own_lo_] = full[natural_of_[i]];
   PetscCall(VecRestoreArray(z, &za));
   PetscFunctionReturn(0);
 }
@@ -749,11 +851,71 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   if (Frictional())
     for (const RigidBody &r : rigid_) prox_weight_[r.dof_offset + 2] = r.radius * r.radius;
   n_total_ = next;
-  const PetscInt n_local = rank_ == 0 ? n_total_ : 0;
+  // Owner of every natural unknown (walls: rank 0), then the PETSc numbering:
+  // rank by rank, natural order inside each rank.
+  PetscCall(UpdatePartition());
+  std::vector<int> owner(n_total_, 0);
+  for (const DeformableBody &b : bodies_)
+    std::fill_n(owner.begin() + b.dof_offset, 2 * b.mesh.num_nodes(), ParticleOwner(b.particle));
+  for (const RigidBody &r : rigid_) std::fill_n(owner.begin() + r.dof_offset, RigidDofs(), ParticleOwner(r.particle));
+  for (size_t b = 0; b < torque_.size(); ++b) owner[GaugeOffset() + b] = BodyOwner(static_cast<int>(b));
+  for (size_t c = 0; c < candidates_.size(); ++c) {
+    const int o = CandidateOwner(candidates_[c]);
+    owner[MultiplierOffset() + c] = o;
+    if (tangential_index_[c] >= 0) owner[tangential_index_[c]] = o;
+  }
+  std::vector<PetscInt> first(size_ + 1, 0);
+  for (int o : owner) ++first[o + 1];
+  for (int r = 0; r < size_; ++r) first[r + 1] += first[r];
+  own_lo_ = first[rank_], own_hi_ = first[rank_ + 1];
+  petsc_of_.resize(n_total_);
+  natural_of_.resize(n_total_);
+  for (PetscInt i = 0; i < n_total_; ++i) {
+    petsc_of_[i] = first[owner[i]]++;
+    natural_of_[petsc_of_[i]] = i;
+  }
+  const PetscInt n_local = own_hi_ - own_lo_;
   PetscCall(VecCreateMPI(comm_, n_local, n_total_, &z_));
   PetscCall(VecDuplicate(z_, &r_));
-  PetscCall(VecScatterCreateToAll(z_, &to_all_, &zall_));
+  // Replicated copy in natural order, zall_[i] = z[petsc_of_[i]] (the reverse
+  // scatter adds fall_ into a distributed residual).
+  PetscCall(VecCreateSeq(PETSC_COMM_SELF, n_total_, &zall_));
   PetscCall(VecDuplicate(zall_, &yall_));
+  PetscCall(VecDuplicate(zall_, &fall_));
+  {
+    IS from, to;
+    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, n_total_, petsc_of_.data(), PETSC_COPY_VALUES, &from));
+    PetscCall(ISCreateStride(PETSC_COMM_SELF, n_total_, 0, 1, &to));
+    PetscCall(VecScatterCreate(z_, from, zall_, to, &to_all_));
+    PetscCall(ISDestroy(&from));
+    PetscCall(ISDestroy(&to));
+  }
+  // What this rank's assembly reads and writes: its own unknowns, the walls
+  // and the unknowns of the other bodies in its contacts (ghosts). Newton
+  // iterations move only these; the whole state is gathered once per solve.
+  {
+    std::vector<char> need(n_total_, 0);
+    for (PetscInt i = 0; i < n_total_; ++i) need[i] = owner[i] == rank_;
+    for (int k = 0; k < 4; ++k) need[WallOffset() + k] = 1;
+    std::vector<double> zero(n_total_, 0.0);
+    LocalContact lc;
+    for (const ContactCandidate &c : candidates_) {
+      if (CandidateOwner(c) != rank_) continue;
+      ContactGeometry(c, zero.data(), &lc);
+      for (int a = 0; a < lc.k.ndof; ++a)
+        if (lc.dofs[a] >= 0) need[lc.dofs[a]] = 1;
+    }
+    std::vector<PetscInt> from_idx, to_idx;
+    for (PetscInt i = 0; i < n_total_; ++i)
+      if (need[i]) from_idx.push_back(petsc_of_[i]), to_idx.push_back(i);
+    n_ghost_ = static_cast<PetscInt>(from_idx.size()) - n_local;
+    IS from, to;
+    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, static_cast<PetscInt>(from_idx.size()), from_idx.data(), PETSC_COPY_VALUES, &from));
+    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, static_cast<PetscInt>(to_idx.size()), to_idx.data(), PETSC_COPY_VALUES, &to));
+    PetscCall(VecScatterCreate(z_, from, zall_, to, &to_local_));
+    PetscCall(ISDestroy(&from));
+    PetscCall(ISDestroy(&to));
+  }
 
   std::vector<PetscInt> ci, cj;
   PetscCall(Assemble(nullptr, nullptr, &ci, &cj, nullptr, nullptr, nullptr));
@@ -814,16 +976,23 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
 // rotations (torques) divided by the radius.
 PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force) const {
   const PetscScalar *fa;
-  PetscInt lo, hi;
   PetscFunctionBeginUser;
-  PetscCall(VecGetOwnershipRange(F, &lo, &hi));
   PetscCall(VecGetArrayRead(F, &fa));
-  double m = 0.0;
-  PetscInt where = -1;
-  for (PetscInt i = lo; i < std::min<PetscInt>(hi, GaugeOffset()); ++i)
-    if (std::abs(fa[i - lo]) / std::sqrt(prox_weight_[i]) > m) m = std::abs(fa[i - lo]) / std::sqrt(prox_weight_[i]), where = i;
+  struct {
+    double value;
+    int where;  // natural unknown
+  } m{0.0, -1};
+  for (PetscInt i = own_lo_; i < own_hi_; ++i) {
+    const PetscInt n = natural_of_[i];
+    if (n >= GaugeOffset()) continue;
+    const double f = std::abs(fa[i - own_lo_]) / std::sqrt(prox_weight_[n]);
+    if (f > m.value) m.value = f, m.where = static_cast<int>(n);
+  }
   PetscCall(VecRestoreArrayRead(F, &fa));
-  if (monitor_outer_ && where >= 0) {
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &m, 1, MPI_DOUBLE_INT, MPI_MAXLOC, comm_));
+  *force = m.value;
+  if (monitor_outer_ && m.where >= 0) {
+    const PetscInt where = m.where;
     std::string what = "wall";
     for (const DeformableBody &b : bodies_)
       if (where >= b.dof_offset && where < b.dof_offset + 2 * b.mesh.num_nodes())
@@ -831,9 +1000,8 @@ PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force) const {
     for (const RigidBody &r : rigid_)
       if (where >= r.dof_offset && where < r.dof_offset + RigidDofs())
         what = "rigid particle " + std::to_string(r.particle) + " dof " + std::to_string(where - r.dof_offset);
-    PetscCall(PetscPrintf(PETSC_COMM_SELF, "    largest force %.3e on %s\n", m, what.c_str()));
+    PetscCall(PetscPrintf(comm_, "    largest force %.3e on %s\n", m.value, what.c_str()));
   }
-  PetscCallMPI(MPI_Allreduce(&m, force, 1, MPI_DOUBLE, MPI_MAX, comm_));
   PetscFunctionReturn(0);
 }
 
@@ -975,7 +1143,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       u_start_ = u_;
       PetscFunctionReturn(0);
     }
-    PetscCall(Gather(z_));
+    PetscCall(Gather(z_, true));
     const PetscScalar *za;
     PetscCall(VecGetArrayRead(zall_, &za));
     Unpack(za);
@@ -1023,7 +1191,8 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       PetscCall(VecGetOwnershipRange(r_, &lo, &hi));
       PetscCall(VecGetArrayRead(r_, &ra));
       for (PetscInt i = lo; i < hi; ++i) {
-        const int k = i < WallOffset() ? 0 : i < GaugeOffset() ? 1 : i < MultiplierOffset() ? 2 : i < TangentialOffset() ? 3 : 4;
+        const PetscInt n = natural_of_[i];
+        const int k = n < WallOffset() ? 0 : n < GaugeOffset() ? 1 : n < MultiplierOffset() ? 2 : n < TangentialOffset() ? 3 : 4;
         part[k] += ra[i - lo] * ra[i - lo];
       }
       PetscCall(VecRestoreArrayRead(r_, &ra));

@@ -5,6 +5,9 @@
 
 Cases
   friction-to-half  50 disks, kappa = 0.5, friction 0.8, P/E from 1e-4 up to 0.5
+  mpi               30 disks, kappa = 0.5, friction 0.3, three levels on 1, 2 and 3
+                    MPI ranks (METIS partition): the same curve (phi to the level
+                    criterion's 1e-4, Z to one contact)
   jump              the same scene asked for P/E = 0.1 in a single level (load
                     stepping from the settled packing inside the level), against
                     the same scene taken there in 5 levels: the friction path
@@ -27,10 +30,13 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from driver_tests import check, failures  # noqa: E402  (the same check/report helpers)
 
 
-def run_compact(driver, out, pressures, timeout):
+SCENE = ["-n_particles", "50", "-kappa", "0.5", "-friction", "0.8", "-seed", "1"]
+
+
+def run_compact(driver, out, pressures, timeout, scene=SCENE, launcher=(), extra=()):
     shutil.rmtree(out, ignore_errors=True)
-    cmd = [driver, "-n_particles", "50", "-kappa", "0.5", "-friction", "0.8", "-seed", "1", "-pressures",
-           ",".join(str(p) for p in pressures), "-output_dir", out, "-write_hdf5", "false"]
+    cmd = list(launcher) + [driver] + scene + ["-pressures", ",".join(str(p) for p in pressures), "-output_dir", out,
+                                               "-write_hdf5", "false"] + list(extra)
     print("$ " + " ".join(cmd))
     p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=timeout)
     print(p.stdout)
@@ -58,7 +64,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--driver", required=True)
     ap.add_argument("--workdir", required=True)
-    ap.add_argument("case", choices=["friction-to-half", "jump"])
+    ap.add_argument("--mpiexec", default="mpirun")
+    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi"])
     a = ap.parse_args()
     os.makedirs(a.workdir, exist_ok=True)
     if a.case == "friction-to-half":
@@ -68,6 +75,22 @@ def main():
             check(rows[-1]["phi"] > 0.9, f"phi at P/E = 0.5 is {rows[-1]['phi']:.4f} > 0.9 (deformable half compacts)")
             check(any(r["sliding_contacts"] > 0 for r in rows), "friction: some contacts slide")
             check(rows[-1]["Z_no_rattlers"] > rows[0]["Z_no_rattlers"], "compaction raises the coordination")
+    elif a.case == "mpi":
+        scene = ["-n_particles", "30", "-kappa", "0.5", "-friction", "0.3", "-seed", "3", "-mesh_triangles", "40"]
+        levels = [1e-4, 1e-3, 5e-3]
+        runs = {}
+        for n in (1, 2, 3):
+            launcher = [] if n == 1 else [a.mpiexec, "-n", str(n), "--oversubscribe"]
+            runs[n] = run_compact(a.driver, os.path.join(a.workdir, f"ranks-{n}"), levels, 900, scene, launcher,
+                                  ["-partition_view"])
+        for n in (2, 3):
+            for r1, rn in zip(runs[1], runs[n]):
+                tag = f"{n} ranks, P/E = {r1['P_over_E']:g}"
+                check(abs(rn["phi"] - r1["phi"]) <= 1e-4 * r1["phi"],
+                      f"{tag}: phi {rn['phi']:.6f} vs serial {r1['phi']:.6f} (within 1e-4 relative)")
+                nonrattlers = 30 - r1["rattlers"]
+                check(abs(rn["Z_no_rattlers"] - r1["Z_no_rattlers"]) <= 2.0 / nonrattlers + 1e-12,
+                      f"{tag}: Z_nr {rn['Z_no_rattlers']:.4f} vs serial {r1['Z_no_rattlers']:.4f} (within one contact)")
     else:
         rows = run_compact(a.driver, os.path.join(a.workdir, "jump"), [0.1], timeout=900)
         ref = run_compact(a.driver, os.path.join(a.workdir, "stepped"), [1e-4, 1e-3, 0.01, 0.05, 0.1], timeout=900)

@@ -9,7 +9,9 @@
 //     /body_K/cells        connectivity (n_cells x nodes per cell)
 //     /body_K/cell_area_ratio   current / reference area per cell (J)
 //     /rigid               rigid disks (n_rigid x 4): x, y, radius, rotation
-// Only rank 0 writes (the state is replicated).
+// The CSV is written by rank 0. The HDF5 file is written in parallel (MPI-IO):
+// each body's datasets by the rank owning it, the rest by rank 0; the file
+// layout does not depend on the number of ranks.
 #pragma once
 #include <petscsys.h>
 
@@ -40,6 +42,7 @@ class CsvWriter {
 PetscErrorCode RemoveFile(MPI_Comm comm, const std::string &path);
 
 // Appends level `level` to the HDF5 file `path` (created at level 0).
+// Collective on comm.
 PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level, double P_over_E,
                               const CompactionProblem &problem);
 

@@ -22,9 +22,9 @@
 // Contact pairs (pair_kinematics.hpp, wall_box.hpp): a boundary point of a
 // deformable disk against a wall, a rigid disk against a wall, rigid-rigid,
 // rigid disk against a boundary node of a deformable disk, and a boundary
-// node of one deformable disk against the boundary of another (patch_node:
-// five master nodes, so the contact may slide over a few segments inside one
-// solve with a continuous gap). Walls are frictionless.
+// node of one deformable disk against the boundary of another (curve_node:
+// the smooth curve through five master boundary nodes, so the contact may
+// slide over a segment inside one solve with a C1 gap). Walls are frictionless.
 //
 // Singular modes. Rattlers, the free rotation of frictionless disks and the
 // translation of the whole assembly (walls + bodies) make the tangent
@@ -57,10 +57,24 @@
 // sticking / sliding contacts did not change in the last iteration
 // (deal.II step-42's rule).
 //
-// Parallel layout: every rank keeps a replicated copy of the state for
-// geometry (contact detection, observables); each rank assembles the
-// elements and contacts of the bodies it owns. In this version all bodies and
-// the walls are owned by rank 0 (distribution comes with the METIS issue).
+// Parallel layout. Particles are the unit of ownership: METIS partitions the
+// particle graph (vertices weighted by unknowns, edges = contact candidates;
+// partition.hpp) and a rank owns all unknowns of its particles, the gauges
+// of its deformable disks and the multipliers of the contacts whose slave it
+// owns; rank 0 owns the walls. The code works in the "natural" numbering
+// described above (independent of the number of ranks, so results are too,
+// to round-off); the distributed PETSc numbering lists each rank's unknowns
+// contiguously, in natural order, and is used only at the Vec/Mat interface
+// (petsc_of_ / natural_of_). Every rank keeps a replicated copy of the state
+// for geometry (contact detection, observables), refreshed through a
+// scatter; each rank assembles the elements of its particles and its
+// contacts, the residual contributions are summed into the distributed
+// residual by the reverse scatter and the Jacobian entries go through
+// MatSetValuesCOO (entries of rows owned elsewhere are sent by PETSc).
+// The partition is recomputed with each new candidate layout when METIS
+// finds an edge cut smaller by -repartition_tol or the load imbalance
+// exceeds 1 + repartition_tol (the replicated state makes the migration a
+// renumbering).
 #pragma once
 #include <petscsnes.h>
 
@@ -91,6 +105,8 @@ struct ProblemParameters {
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
   PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path
+  double repartition_tol = 0.1;  // repartition when the new edge cut is smaller by this fraction or the imbalance exceeds 1 + this (< 0: never)
+  PetscBool partition_view = PETSC_FALSE;     // print edge cut and imbalance of every (re)partition
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
 
@@ -277,6 +293,9 @@ class CompactionProblem {
   double ProximalDiagonal(PetscInt i) const;
   // Contact states (0 open, 1 closed/stick, 2 sliding) at the last residual evaluation.
   const std::vector<char> &ActiveSet() const { return active_now_; }
+  // Rank owning each particle (empty on one rank: everything is rank 0's); PETSc index of a natural unknown.
+  const std::vector<int> &ParticleOwners() const { return particle_owner_; }
+  PetscInt PetscIndex(PetscInt natural) const { return petsc_of_[natural]; }
 
  private:
   friend PetscErrorCode FormFunction(SNES, Vec, Vec, void *);
@@ -297,14 +316,18 @@ class CompactionProblem {
   void ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc, bool hessians = false) const;
   PetscErrorCode SetUpLayout();      // sizes, Vec/Mat/SNES for the current candidate set
   PetscErrorCode DestroySolver();
-  PetscErrorCode Gather(Vec z);      // z -> replicated zall_ array
+  PetscErrorCode Gather(Vec z, bool full);  // z -> zall_ (natural order): everything, or own + ghost unknowns
   PetscErrorCode ForceResidual(Vec F, double *force) const;  // largest unbalanced force (body and wall rows)
   PetscErrorCode Assemble(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
                           std::vector<PetscScalar> *cv, bool *inverted, std::vector<char> *active);
   void Unpack(const double *z);
   void Pack(double *z) const;
   std::vector<ContactCandidate> DetectCandidates(double margin) const;
-  bool OwnsEverything() const { return rank_ == 0; }
+  PetscErrorCode UpdatePartition();  // METIS partition of the particles for the current candidates
+  int ParticleOwner(int particle) const { return particle_owner_.empty() ? 0 : particle_owner_[particle]; }
+  int BodyOwner(int b) const { return ParticleOwner(bodies_[b].particle); }
+  int CandidateOwner(const ContactCandidate &c) const;  // the slave's owner
+  bool OwnsNatural(PetscInt i) const { return petsc_of_[i] >= own_lo_ && petsc_of_[i] < own_hi_; }
   int RigidDofs() const { return Frictional() ? 3 : 2; }
   PetscInt WallOffset() const { return n_body_dofs_; }
   PetscInt GaugeOffset() const { return n_body_dofs_ + 4; }
@@ -339,8 +362,15 @@ class CompactionProblem {
   // Solver objects for the current layout.
   PetscInt n_total_ = -1;
   Vec z_ = nullptr, r_ = nullptr, zall_ = nullptr;
+  Vec fall_ = nullptr;               // replicated residual contributions of this rank (natural order)
+  std::vector<PetscInt> petsc_of_;   // natural unknown -> PETSc index
+  std::vector<PetscInt> natural_of_; // PETSc index -> natural unknown
+  PetscInt own_lo_ = 0, own_hi_ = 0; // this rank's PETSc rows
+  std::vector<int> particle_owner_;  // rank of each particle (empty: everything on rank 0)
   Vec yall_ = nullptr;               // replicated Newton step (LimitStep), allocated with the layout
-  VecScatter to_all_ = nullptr;
+  VecScatter to_all_ = nullptr;     // whole state, natural order (once per solve: replicated copy)
+  VecScatter to_local_ = nullptr;   // own + ghost unknowns only (every Newton iteration; reverse: residual)
+  PetscInt n_ghost_ = 0;            // unknowns this rank reads but does not own
   Mat J_ = nullptr;
   SNES snes_ = nullptr;
   std::vector<char> active_now_, active_checked_;
