@@ -91,7 +91,8 @@ def main():
         last = levels[-1] if levels else {}
         rows.append([k, m, st, len(levels), last.get("P_over_E", ""), f"{sec:.0f}", last.get("phi", ""),
                      last.get("Z_no_rattlers", ""), sum(float(l["newton_its"]) for l in levels)])
-    with open(os.path.join(a.out, "runs.csv"), "w", newline="") as f:
+    # --fit-only keeps the runs.csv of the campaign that produced the curves.
+    with open(os.path.join(a.out, "runs.csv" if not a.fit_only else os.devnull), "w", newline="") as f:
         f.write(f"# machine: {platform.node()}, {os.cpu_count()} cores; commit {commit()}\n")
         f.write(f"# command: {' '.join(sys.argv)}\n# compact: -n_particles {a.n_particles} -pressures {a.pressures} {a.extra}\n")
         w = csv.writer(f)
@@ -120,7 +121,8 @@ def main():
     if curves_all:
         subprocess.run([PY, os.path.join(ROOT, "scripts", "plot_compaction.py"), os.path.join(a.out, "compaction.png")]
                        + curves_all)
-    print("wrote", os.path.join(a.out, "runs.csv"))
+    if not a.fit_only:
+        print("wrote", os.path.join(a.out, "runs.csv"))
 
 
 if __name__ == "__main__":

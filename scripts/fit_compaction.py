@@ -178,15 +178,15 @@ def main(argv=None):
                              r.rms, r.residual, r.nobs))
 
     # table
-    print("\n%-14s %-14s %-52s %-10s %s" % ("curve", "model", "fitted parameters (± 1 sigma)", "rms", "fixed"))
+    print("\n%-18s %-14s %-52s %-10s %s" % ("curve", "model", "fitted parameters (± 1 sigma)", "rms", "fixed"))
     print("-" * 120)
     for ds in datasets:
         for name, r in ds["fits"].items():
             par = ", ".join(f"{pn}={fmt(v, e)}" for pn, v, e in zip(r.names, r.values, r.stderr))
             fx = ", ".join(f"{k}={v:.5g}" for k, v in r.fixed.items())
-            print("%-14s %-14s %-52s %-10s %s" % (ds["label"][:14], name, par, f"{r.rms:.2e} ({r.residual})", fx))
+            print("%-18s %-14s %-52s %-10s %s" % (ds["label"][:18], name, par, f"{r.rms:.2e} ({r.residual})", fx))
     for model, (_, _, r) in mix.items():
-        print("%-14s %-14s %-52s %-10s %s" % ("all", f"mixture[{model}]", f"phi1max={fmt(r['phi1max'], r.err('phi1max'))}",
+        print("%-18s %-14s %-52s %-10s %s" % ("all", f"mixture[{model}]", f"phi1max={fmt(r['phi1max'], r.err('phi1max'))}",
                                                f"{r.rms:.2e} (phimax)", f"phi0={r['phi0']:.5g}"))
 
     with open(out + ".csv", "w", newline="") as fh:
