@@ -171,6 +171,29 @@ int CompactionProblem::AddRigidBody(double cx, double cy, double radius) {
 
 void CompactionProblem::SetWalls(const double w[4]) { std::copy(w, w + 4, w_); }
 
+int CompactionProblem::SeedForcesFromOverlaps(double P) {
+  if (RefreshCandidates() != 0) return 0;
+  std::vector<double> z(MultiplierOffset() + candidates_.size(), 0.0);
+  std::copy(u_.begin(), u_.end(), z.begin());
+  std::copy(w_, w_ + 4, z.begin() + WallOffset());
+  LocalContact lc;
+  double on_walls = 0.0;
+  int seeded = 0;
+  std::vector<double> raw(candidates_.size(), 0.0);
+  for (size_t c = 0; c < candidates_.size(); ++c) {
+    ContactGeometry(candidates_[c], z.data(), &lc);
+    if (lc.k.gap >= 0.0) continue;
+    raw[c] = -lc.k.gap;
+    ++seeded;
+    const ContactType t = candidates_[c].type;
+    if (t == ContactType::PointWall || t == ContactType::RigidWall) on_walls += raw[c];
+  }
+  if (on_walls <= 0.0) return 0;
+  const double scale = P * 2.0 * (WallBox::width(w_) + WallBox::height(w_)) / on_walls;
+  for (size_t c = 0; c < candidates_.size(); ++c) lambda_[c] = scale * raw[c];
+  return seeded;
+}
+
 int CompactionProblem::CandidateOwner(const ContactCandidate &c) const {
   const bool rigid_slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid;
   return ParticleOwner(rigid_slave ? rigid_[c.body].particle : bodies_[c.body].particle);
@@ -951,7 +974,8 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscCall(SNESSetFromOptions(snes_));
   // Contact saddle points need numerical pivoting, and MUMPS' workspace
   // estimate (made before pivoting) is then often too small (INFOG(1) = -9):
-  // reserve 100 % more unless -mat_mumps_icntl_14 says otherwise.
+  // reserve mumps_extra_ % more (100 at first, doubled after each such
+  // failure, see Solve) unless -mat_mumps_icntl_14 says otherwise.
   MatSolverType solver_type = nullptr;
   PetscBool is_lu = PETSC_FALSE, icntl14_set = PETSC_FALSE;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCLU, &is_lu));
@@ -961,7 +985,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
     Mat factor;
     PetscCall(PCFactorSetUpMatSolverType(pc));
     PetscCall(PCFactorGetMatrix(pc, &factor));
-    PetscCall(MatMumpsSetIcntl(factor, 14, 100));
+    PetscCall(MatMumpsSetIcntl(factor, 14, mumps_extra_));
   }
   PetscBool monitor = PETSC_FALSE;
   PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-newton_monitor", &monitor, nullptr));
@@ -1123,6 +1147,24 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     PetscCall(SNESGetConvergedReason(snes_, &report->reason));
     report->newton_its += its;
     PetscCall(SNESGetFunctionNorm(snes_, &report->residual));
+    if (report->reason == SNES_DIVERGED_LINEAR_SOLVE && mumps_extra_ < 6400) {
+      // MUMPS ran out of its workspace: enlarge it and redo the same step.
+      KSP ksp;
+      PC pc;
+      PCFailedReason pc_reason;
+      PetscCall(SNESGetKSP(snes_, &ksp));
+      PetscCall(KSPGetPC(ksp, &pc));
+      PetscCall(PCGetFailedReason(pc, &pc_reason));
+      int out_of_memory = pc_reason == PC_FACTOR_OUTMEMORY;
+      PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &out_of_memory, 1, MPI_INT, MPI_MAX, comm_));
+      if (out_of_memory) {
+        mumps_extra_ *= 2;
+        PetscCall(PetscInfo(snes_, "MUMPS workspace too small (INFOG(1) = -9): ICNTL(14) = %d\n", (int)mumps_extra_));
+        PetscCall(DestroySolver());  // the next layout reserves the larger workspace
+        --outer;
+        continue;
+      }
+    }
     if (report->reason <= 0) {
       if (monitor_outer_)
         PetscCall(PetscPrintf(comm_, "  ptc %3d  inner solve failed (%s after %" PetscInt_FMT " its, rho_a %.2e)\n", outer,
