@@ -153,10 +153,8 @@ PetscErrorCode Run(MPI_Comm comm) {
     double step = -1.0;
     LevelReport rep;
     // At most P/E = 1e-4: contacts exact, deformations negligible; larger
-    // first levels are then reached by load stepping. The soft packing's
-    // overlap forces are the starting contact forces.
+    // first levels are then reached by load stepping.
     const double P_settle = std::min(opts.pressures[0], 1e-4) * params.young;
-    rigid.SeedForcesFromOverlaps(P_settle);
     PetscCall(AdvanceToPressure(rigid, load, P_settle, &step, &rep));
     for (int i = 0; i < packing.size(); ++i) {
       double x[2];

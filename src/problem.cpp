@@ -171,29 +171,6 @@ int CompactionProblem::AddRigidBody(double cx, double cy, double radius) {
 
 void CompactionProblem::SetWalls(const double w[4]) { std::copy(w, w + 4, w_); }
 
-int CompactionProblem::SeedForcesFromOverlaps(double P) {
-  if (RefreshCandidates() != 0) return 0;
-  std::vector<double> z(MultiplierOffset() + candidates_.size(), 0.0);
-  std::copy(u_.begin(), u_.end(), z.begin());
-  std::copy(w_, w_ + 4, z.begin() + WallOffset());
-  LocalContact lc;
-  double on_walls = 0.0;
-  int seeded = 0;
-  std::vector<double> raw(candidates_.size(), 0.0);
-  for (size_t c = 0; c < candidates_.size(); ++c) {
-    ContactGeometry(candidates_[c], z.data(), &lc);
-    if (lc.k.gap >= 0.0) continue;
-    raw[c] = -lc.k.gap;
-    ++seeded;
-    const ContactType t = candidates_[c].type;
-    if (t == ContactType::PointWall || t == ContactType::RigidWall) on_walls += raw[c];
-  }
-  if (on_walls <= 0.0) return 0;
-  const double scale = P * 2.0 * (WallBox::width(w_) + WallBox::height(w_)) / on_walls;
-  for (size_t c = 0; c < candidates_.size(); ++c) lambda_[c] = scale * raw[c];
-  return seeded;
-}
-
 int CompactionProblem::CandidateOwner(const ContactCandidate &c) const {
   const bool rigid_slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid;
   return ParticleOwner(rigid_slave ? rigid_[c.body].particle : bodies_[c.body].particle);

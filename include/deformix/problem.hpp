@@ -284,14 +284,6 @@ class CompactionProblem {
   void SetFrictionActive(bool on) { friction_on_ = on; }
   // Makes the current state the start of the load step (reference of the incremental slip).
   void MarkStepStart() { u_start_ = u_; }
-  // Initial contact forces for a packing built by soft-disk energy
-  // minimization (packing.hpp): the harmonic force of each overlap, lambda =
-  // -g where the gap g < 0, scaled so that the walls carry the pressure P
-  // (sum of wall forces = P x perimeter). A force-balanced soft packing then
-  // gives a nearly balanced exact-contact start, instead of zero forces that
-  // the pseudo-transient continuation would have to build by moving bodies.
-  // Refreshes the candidates; returns the number of seeded contacts.
-  int SeedForcesFromOverlaps(double P);
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
   const std::vector<ContactCandidate> &Candidates() const { return candidates_; }
   const std::vector<double> &Multipliers() const { return lambda_; }
