@@ -182,6 +182,7 @@ int CompactionProblem::CandidateOwner(const ContactCandidate &c) const {
 // between two particles. Computed on rank 0 and broadcast.
 PetscErrorCode CompactionProblem::UpdatePartition() {
   PetscFunctionBeginUser;
+  partition_adopted_ = false;
   if (size_ == 1) {
     particle_owner_.clear();
     PetscFunctionReturn(0);
@@ -232,6 +233,7 @@ PetscErrorCode CompactionProblem::UpdatePartition() {
     }
   }
   PetscCallMPI(MPI_Bcast(&adopt, 1, MPI_INT, 0, comm_));
+  partition_adopted_ = adopt > 0;
   PetscCheck(adopt >= 0, comm_, PETSC_ERR_LIB, "partitioning the particles failed: %s", error.c_str());
   if (adopt) {
     PetscCallMPI(MPI_Bcast(owner.data(), np, MPI_INT, 0, comm_));
@@ -909,6 +911,15 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
     for (PetscInt i = 0; i < n_total_; ++i)
       if (need[i]) from_idx.push_back(petsc_of_[i]), to_idx.push_back(i);
     n_ghost_ = static_cast<PetscInt>(from_idx.size()) - n_local;
+    if (params_.partition_view && partition_adopted_) {
+      // Communication per Newton iteration: the ghost unknowns each rank reads.
+      PetscInt ghost[2] = {n_ghost_, -n_ghost_}, own[2] = {n_local, -n_local};
+      PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, ghost, 2, MPIU_INT, MPI_MAX, comm_));
+      PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, own, 2, MPIU_INT, MPI_MAX, comm_));
+      PetscCall(PetscPrintf(comm_, "  partition: owned unknowns per rank %" PetscInt_FMT "..%" PetscInt_FMT
+                                   ", ghost unknowns per rank %" PetscInt_FMT "..%" PetscInt_FMT "\n",
+                            -own[1], own[0], -ghost[1], ghost[0]));
+    }
     IS from, to;
     PetscCall(ISCreateGeneral(PETSC_COMM_SELF, static_cast<PetscInt>(from_idx.size()), from_idx.data(), PETSC_COPY_VALUES, &from));
     PetscCall(ISCreateGeneral(PETSC_COMM_SELF, static_cast<PetscInt>(to_idx.size()), to_idx.data(), PETSC_COPY_VALUES, &to));

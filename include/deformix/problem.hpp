@@ -371,6 +371,7 @@ class CompactionProblem {
   VecScatter to_all_ = nullptr;     // whole state, natural order (once per solve: replicated copy)
   VecScatter to_local_ = nullptr;   // own + ghost unknowns only (every Newton iteration; reverse: residual)
   PetscInt n_ghost_ = 0;            // unknowns this rank reads but does not own
+  bool partition_adopted_ = false;  // the last UpdatePartition changed the owners (-partition_view reports)
   Mat J_ = nullptr;
   SNES snes_ = nullptr;
   std::vector<char> active_now_, active_checked_;
