@@ -171,9 +171,15 @@ int CompactionProblem::AddRigidBody(double cx, double cy, double radius) {
 
 void CompactionProblem::SetWalls(const double w[4]) { std::copy(w, w + 4, w_); }
 
-int CompactionProblem::CandidateOwner(const ContactCandidate &c) const {
+int CompactionProblem::SlaveParticle(const ContactCandidate &c) const {
   const bool rigid_slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid;
-  return ParticleOwner(rigid_slave ? rigid_[c.body].particle : bodies_[c.body].particle);
+  return rigid_slave ? rigid_[c.body].particle : bodies_[c.body].particle;
+}
+
+int CompactionProblem::MasterParticle(const ContactCandidate &c) const {
+  if (c.type == ContactType::RigidRigid || c.type == ContactType::RigidNode) return rigid_[c.master].particle;
+  if (c.type == ContactType::NodeSegment) return bodies_[c.master].particle;
+  return -1;  // a wall
 }
 
 // METIS partition of the particle graph (partition.hpp): a vertex per
@@ -194,12 +200,8 @@ PetscErrorCode CompactionProblem::UpdatePartition() {
     graph.vertex_weight[b.particle] += 2 * b.mesh.num_nodes() + (torque_.empty() ? 0 : 1);
   for (const RigidBody &r : rigid_) graph.vertex_weight[r.particle] += RigidDofs();
   for (const ContactCandidate &c : candidates_) {
-    const bool rigid_slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid;
-    const int slave = rigid_slave ? rigid_[c.body].particle : bodies_[c.body].particle;
+    const int slave = SlaveParticle(c), master = MasterParticle(c);
     graph.vertex_weight[slave] += HasTangential(c) ? 2 : 1;
-    int master = -1;
-    if (c.type == ContactType::RigidRigid || c.type == ContactType::RigidNode) master = rigid_[c.master].particle;
-    if (c.type == ContactType::NodeSegment) master = bodies_[c.master].particle;
     if (master >= 0) graph.edges.emplace_back(master, slave);
   }
   int adopt = 0;
@@ -1305,13 +1307,8 @@ std::vector<ContactForce> CompactionProblem::ContactForces() const {
     f.gap = lc.k.gap;
     f.normal_multiplier = lambda_[c];
     f.tangential_multiplier = lambda_t_[c];
-    const bool deformable_slave =
-        cc.type == ContactType::PointWall || cc.type == ContactType::RigidNode || cc.type == ContactType::NodeSegment;
-    f.slave_particle = deformable_slave ? bodies_[cc.body].particle : rigid_[cc.body].particle;
-    if (cc.type == ContactType::RigidRigid || cc.type == ContactType::RigidNode)
-      f.master_particle = rigid_[cc.master].particle;
-    else if (cc.type == ContactType::NodeSegment)
-      f.master_particle = bodies_[cc.master].particle;
+    f.slave_particle = SlaveParticle(cc);
+    f.master_particle = MasterParticle(cc);
     if (lc.slave_xy >= 0) {
       // Generalized force on the slave's translation: lambda_n dg/dx + lambda_t ds/dx.
       for (int i = 0; i < 2; ++i)

@@ -326,7 +326,9 @@ class CompactionProblem {
   PetscErrorCode UpdatePartition();  // METIS partition of the particles for the current candidates
   int ParticleOwner(int particle) const { return particle_owner_.empty() ? 0 : particle_owner_[particle]; }
   int BodyOwner(int b) const { return ParticleOwner(bodies_[b].particle); }
-  int CandidateOwner(const ContactCandidate &c) const;  // the slave's owner
+  int SlaveParticle(const ContactCandidate &c) const;   // particle index of the slave body
+  int MasterParticle(const ContactCandidate &c) const;  // particle index of the master body, -1 for a wall
+  int CandidateOwner(const ContactCandidate &c) const { return ParticleOwner(SlaveParticle(c)); }
   bool OwnsNatural(PetscInt i) const { return petsc_of_[i] >= own_lo_ && petsc_of_[i] < own_hi_; }
   int RigidDofs() const { return Frictional() ? 3 : 2; }
   PetscInt WallOffset() const { return n_body_dofs_; }
