@@ -1,5 +1,5 @@
 // Packing generation: diameters, jammed frictionless packing (O'Hern-style
-// FIRE + box bisection with walls), deformable assignment along a Hilbert
+// FIRE on the enthalpy with a free rectangular box and walls), deformable assignment along a Hilbert
 // curve. Plain C++17, no PETSc. Reproducible: random numbers come from the raw
 // std::mt19937_64 output (fully specified by the standard), never from the
 // implementation-defined std::*_distribution classes.
@@ -110,20 +110,21 @@ void build_pairs(const std::vector<double> &x, const std::vector<double> &y, con
     }
 }
 
-// ---- soft-disk system in the box [0, L]^2 -------------------------------------
+// ---- soft-disk system in the box [0, Lx] x [0, Ly] -----------------------------
 struct SoftSystem {
   std::vector<double> x, y, r, fx, fy, vx, vy, xref, yref;
   std::vector<std::pair<int, int>> pairs;
-  double L = 1;
+  double Lx = 1, Ly = 1;
   double skin = 0.2;
   // results of the last force evaluation
   double energy = 0, max_ov = 0, sum_ov = 0, fmax2 = 0;
+  double wxx = 0, wyy = 0;  // virial: -dU/d(ln Lx), -dU/d(ln Ly) under affine box strain
   int n_ov = 0;
 
   int n() const { return static_cast<int>(x.size()); }
 
   void rebuild() {
-    build_pairs(x, y, r, 0.0, L, 0.0, L, skin, pairs);
+    build_pairs(x, y, r, 0.0, Lx, 0.0, Ly, skin, pairs);
     xref = x;
     yref = y;
   }
@@ -143,6 +144,7 @@ struct SoftSystem {
     energy = 0;
     max_ov = 0;
     sum_ov = 0;
+    wxx = wyy = 0;
     n_ov = 0;
     for (const auto &p : pairs) {
       const int i = p.first, j = p.second;
@@ -161,6 +163,8 @@ struct SoftSystem {
         fy[i] -= f * dy;
         fx[j] += f * dx;
         fy[j] += f * dy;
+        wxx += f * dx * dx;
+        wyy += f * dy * dy;
       } else {  // coincident centres: push apart along x (deterministic)
         fx[i] -= ov;
         fx[j] += ov;
@@ -168,7 +172,7 @@ struct SoftSystem {
     }
     for (int i = 0; i < nn; ++i) {
       const double ri = r[i];
-      const double ovs[4] = {ri - x[i], x[i] + ri - L, ri - y[i], y[i] + ri - L};
+      const double ovs[4] = {ri - x[i], x[i] + ri - Lx, ri - y[i], y[i] + ri - Ly};
       for (int w = 0; w < 4; ++w) {
         const double ov = ovs[w];
         if (ov <= 0) continue;
@@ -176,11 +180,12 @@ struct SoftSystem {
         sum_ov += ov;
         ++n_ov;
         max_ov = std::max(max_ov, ov);
+        // Branch vectors from the wall to the centre: x, Lx - x, y, Ly - y.
         switch (w) {
-          case 0: fx[i] += ov; break;
-          case 1: fx[i] -= ov; break;
-          case 2: fy[i] += ov; break;
-          default: fy[i] -= ov; break;
+          case 0: fx[i] += ov; wxx += ov * x[i]; break;
+          case 1: fx[i] -= ov; wxx += ov * (Lx - x[i]); break;
+          case 2: fy[i] += ov; wyy += ov * y[i]; break;
+          default: fy[i] -= ov; wyy += ov * (Ly - y[i]); break;
         }
       }
     }
@@ -188,45 +193,54 @@ struct SoftSystem {
     for (int i = 0; i < nn; ++i) fmax2 = std::max(fmax2, fx[i] * fx[i] + fy[i] * fy[i]);
   }
 
-  void set_box(double Lnew) {
-    const double s = Lnew / L;
+  // Affine box strain: Lx -> Lx e^ex, Ly -> Ly e^ey, centres with it.
+  void strain_box(double ex, double ey) {
+    const double sx = std::exp(ex), sy = std::exp(ey);
     for (int i = 0; i < n(); ++i) {
-      x[i] *= s;
-      y[i] *= s;
+      x[i] *= sx;
+      y[i] *= sy;
     }
-    L = Lnew;
-    rebuild();
+    Lx *= sx;
+    Ly *= sy;
   }
 };
 
-enum class MinResult { kUnjammed, kJammed, kCapped };
-
 // FIRE (Bitzek et al. 2006, with the FIRE 2.0 half-step correction of Guenole
-// et al. 2020), unit masses, semi-implicit Euler. Stops when
-//  - no overlap is left or the largest overlap < unjammed_ov: unjammed;
-//  - the largest net force < force_rel * mean overlap (= mean contact force):
-//    force-balanced with U > 0, jammed;
-//  - max_it steps: capped (classified by the caller).
-MinResult fire_minimize(SoftSystem &s, double unjammed_ov, double force_rel, int max_it, long long &iters) {
+// et al. 2020), unit masses, semi-implicit Euler, on the enthalpy
+//   H = U + p Lx Ly,   U = sum over overlaps of delta^2 / 2,
+// over the centres and the two box strains (ln Lx, ln Ly; as lengths
+// q = L0 ln L with unit mass, so that their stiffness is that of a disk).
+// The generalized box forces are (A sigma_xx - p A) / L0 with the virial
+// stress A sigma = wxx: at the minimum the packing is force-balanced and its
+// stress is isotropic, sigma_xx = sigma_yy = p, as under the four
+// pressure-driven walls of the contact solver. Converged when the largest
+// net force on a disk < force_rel * mean overlap (the mean contact force)
+// and |sigma - p| < force_rel p in both directions.
+bool fire_enthalpy(SoftSystem &s, double p, double force_rel, int max_it, double max_box_move, long long &iters) {
   const double dt0 = 0.1, dt_max = 0.5, dt_min = 1e-3;
   const double f_inc = 1.1, f_dec = 0.5, alpha0 = 0.1, f_alpha = 0.99;
   const int n_delay = 5;
   const int nn = s.n();
+  const double L0 = std::sqrt(s.Lx * s.Ly);
   std::fill(s.vx.begin(), s.vx.end(), 0.0);
   std::fill(s.vy.begin(), s.vy.end(), 0.0);
+  double vq[2] = {0, 0}, gq[2];
   double dt = dt0, alpha = alpha0;
   int n_pos = 0;
   s.forces();
   for (int it = 0;; ++it) {
-    if (s.n_ov == 0 || s.max_ov < unjammed_ov) return MinResult::kUnjammed;
-    const double fmean = s.sum_ov / s.n_ov;
-    if (s.fmax2 < force_rel * force_rel * fmean * fmean) return MinResult::kJammed;
-    if (it >= max_it) return MinResult::kCapped;
+    const double A = s.Lx * s.Ly;
+    gq[0] = (s.wxx - p * A) / L0;
+    gq[1] = (s.wyy - p * A) / L0;
+    const double fmean = s.n_ov > 0 ? s.sum_ov / s.n_ov : 0.0;
+    if (s.n_ov > 0 && s.fmax2 <= force_rel * force_rel * fmean * fmean &&
+        std::abs(s.wxx - p * A) <= force_rel * p * A && std::abs(s.wyy - p * A) <= force_rel * p * A)
+      return true;
+    if (it >= max_it) return false;
     ++iters;
-    double P = 0, vv = 0, ff = 0;
+    double P = gq[0] * vq[0] + gq[1] * vq[1], ff = gq[0] * gq[0] + gq[1] * gq[1];
     for (int i = 0; i < nn; ++i) {
       P += s.fx[i] * s.vx[i] + s.fy[i] * s.vy[i];
-      vv += s.vx[i] * s.vx[i] + s.vy[i] * s.vy[i];
       ff += s.fx[i] * s.fx[i] + s.fy[i] * s.fy[i];
     }
     if (P > 0) {
@@ -244,14 +258,19 @@ MinResult fire_minimize(SoftSystem &s, double unjammed_ov, double force_rel, int
         s.vx[i] = 0;
         s.vy[i] = 0;
       }
-      vv = 0;
+      s.strain_box(-0.5 * dt * vq[0] / L0, -0.5 * dt * vq[1] / L0);
+      vq[0] = vq[1] = 0;
     }
     // MD step, then FIRE mixing with the updated velocity.
-    vv = 0;
+    double vv = 0;
     for (int i = 0; i < nn; ++i) {
       s.vx[i] += dt * s.fx[i];
       s.vy[i] += dt * s.fy[i];
       vv += s.vx[i] * s.vx[i] + s.vy[i] * s.vy[i];
+    }
+    for (int k = 0; k < 2; ++k) {
+      vq[k] += dt * gq[k];
+      vv += vq[k] * vq[k];
     }
     const double mix = (ff > 0) ? alpha * std::sqrt(vv / ff) : 0.0;
     for (int i = 0; i < nn; ++i) {
@@ -260,6 +279,13 @@ MinResult fire_minimize(SoftSystem &s, double unjammed_ov, double force_rel, int
       s.x[i] += dt * s.vx[i];
       s.y[i] += dt * s.vy[i];
     }
+    for (int k = 0; k < 2; ++k) {
+      vq[k] = (1 - alpha) * vq[k] + mix * gq[k];
+      // The box moves by at most max_box_move per step (a fast collapse of a
+      // loose box would otherwise push disks through each other).
+      vq[k] = std::max(-max_box_move / dt, std::min(max_box_move / dt, vq[k]));
+    }
+    s.strain_box(dt * vq[0] / L0, dt * vq[1] / L0);
     s.maybe_rebuild();
     s.forces();
   }
@@ -270,20 +296,20 @@ void random_placement(SoftSystem &s, std::mt19937_64 &eng) {
   const int n = s.n();
   const double rmax = *std::max_element(s.r.begin(), s.r.end());
   const double h = 2 * rmax;
-  const int nc = std::max(1, static_cast<int>(s.L / h));
-  const double hc = s.L / nc;
+  const int nc = std::max(1, static_cast<int>(s.Lx / h));
+  const double hc = s.Lx / nc;
   std::vector<std::vector<int>> cells(static_cast<std::size_t>(nc) * nc);
   auto cell_of = [&](double v) { return std::min(nc - 1, std::max(0, static_cast<int>(v / hc))); };
   const long long max_tries = 100000000LL;
   long long tries = 0;
   for (int i = 0; i < n; ++i) {
     const double ri = s.r[i];
-    if (2 * ri > s.L) throw std::runtime_error("make_jammed_packing: box smaller than a disk");
+    if (2 * ri > s.Lx) throw std::runtime_error("make_jammed_packing: box smaller than a disk");
     for (;;) {
       if (++tries > max_tries)
         throw std::runtime_error("make_jammed_packing: random placement failed; lower opts.initial_fraction");
-      const double xi = ri + uniform01(eng) * (s.L - 2 * ri);
-      const double yi = ri + uniform01(eng) * (s.L - 2 * ri);
+      const double xi = ri + uniform01(eng) * (s.Lx - 2 * ri);
+      const double yi = ri + uniform01(eng) * (s.Lx - 2 * ri);
       const int cx = cell_of(xi), cy = cell_of(yi);
       const int reach = static_cast<int>(std::ceil((ri + rmax) / hc));
       bool ok = true;
@@ -367,57 +393,48 @@ DiskPacking make_jammed_packing(int n, unsigned seed, const PackingOptions &opts
   s.vx.assign(n, 0);
   s.vy.assign(n, 0);
   s.skin = 0.3 * dmean;
-  double phi = opts.initial_fraction;
-  s.L = std::sqrt(area / phi);
+  s.Lx = s.Ly = std::sqrt(area / opts.initial_fraction);
   std::mt19937_64 eng = make_engine(seed, 1);
   random_placement(s, eng);
   s.rebuild();
 
+  // Pressure-controlled jamming: minimize the enthalpy at p = 1e-2 (overlaps
+  // of about 1 % <d>: the quench from the loose state), then lower p by
+  // decades (at most) until the largest overlap is below the target; the
+  // last state is balanced to force_final. The contact solver then finds
+  // the same network in exact contact, with the same forces to O(overlap),
+  // in equilibrium under four walls at the same isotropic pressure.
   const double tol = opts.target_overlap * dmean;
-  const double unjammed_ov = 1e-2 * tol;  // "no overlap left"
-  const double force_rel = 1e-4;          // force balance (net force / mean contact force) while bisecting
-  const double force_final = 1e-6;        // ... and for the accepted state
-  const int polish_cap = 200000;
-  double dphi = 0.01;
-  int direction = +1;
+  const double force_rel = 1e-4;    // balance (net force / mean contact force, stress / p) of the stages
+  const double force_final = 1e-6;  // ... and of the accepted state
+  const double max_box_move = 0.05 * dmean;
+  double pressure = 1e-2;
   JammingStats st;
   st.mean_diameter = dmean;
-  for (int outer = 0;; ++outer) {
-    if (dphi < 1e-15 || outer > 100000) {
+  for (;;) {
+    ++st.minimizations;
+    if (!fire_enthalpy(s, pressure, force_rel, opts.max_iterations, max_box_move, st.fire_iterations))
+      ++st.capped_minimizations;
+    if (s.max_ov <= tol) {
+      ++st.minimizations;
+      if (!fire_enthalpy(s, pressure, force_final, opts.max_iterations, max_box_move, st.fire_iterations))
+        ++st.capped_minimizations;
+      if (s.max_ov <= tol) break;
+    }
+    pressure *= std::max(0.1, std::min(0.5, 0.8 * tol / s.max_ov));
+    if (pressure < 1e-14 * dmean) {
       std::ostringstream msg;
-      msg << "make_jammed_packing: box bisection did not reach max overlap <= " << opts.target_overlap
-          << " <d> (phi = " << phi << ", step " << dphi << "); raise opts.max_iterations";
+      msg << "make_jammed_packing: the largest overlap stays above " << opts.target_overlap
+          << " <d> down to pressure " << pressure << "; raise opts.max_iterations";
       throw std::runtime_error(msg.str());
     }
-    phi += direction * dphi;
-    s.set_box(std::sqrt(area / phi));
-    ++st.minimizations;
-    MinResult res = fire_minimize(s, unjammed_ov, force_rel, opts.max_iterations, st.fire_iterations);
-    if (res == MinResult::kJammed && s.max_ov <= tol) {
-      // Candidate: polish the force balance to force_final so that the
-      // contact network is the converged one, then re-classify.
-      ++st.minimizations;
-      // (Capped at polish_cap steps: at very low pressure FIRE converges
-      // slowly; the state is already balanced to force_rel.)
-      res = fire_minimize(s, unjammed_ov, force_final, std::min(opts.max_iterations, polish_cap), st.fire_iterations);
-      if (res != MinResult::kUnjammed && s.max_ov <= tol) break;  // jammed at vanishing overlap
-    } else if (res == MinResult::kCapped) {
-      ++st.capped_minimizations;
-    }
-    if (res != MinResult::kUnjammed) {  // overlap remains (capped: the box is too small for now)
-      if (direction > 0) {
-        dphi *= 0.5;
-        direction = -1;
-      }
-    } else if (direction < 0) {
-      dphi *= 0.5;
-      direction = +1;
-    }
   }
+  st.pressure = pressure;
 
   st.energy = s.energy / (dmean * dmean);
   st.max_overlap = s.max_ov / dmean;
   st.residual_force = std::sqrt(s.fmax2) / (s.sum_ov / s.n_ov);
+  st.stress_anisotropy = std::abs(s.wxx - s.wyy) / (st.pressure * s.Lx * s.Ly);
   if (stats) *stats = st;
 
   DiskPacking p;
@@ -426,9 +443,9 @@ DiskPacking make_jammed_packing(int n, unsigned seed, const PackingOptions &opts
   p.radius = s.r;
   p.deformable.assign(n, 0);
   p.walls[0] = 0;
-  p.walls[1] = s.L;
+  p.walls[1] = s.Lx;
   p.walls[2] = 0;
-  p.walls[3] = s.L;
+  p.walls[3] = s.Ly;
   return p;
 }
 

@@ -232,12 +232,15 @@ TEST(CoulombLaw, StickSlipAndOpenBranches) {
 // A random 20-disk mixture (the compact driver's scene and protocol):
 // Signorini and Coulomb hold exactly at every contact, the unbalanced forces
 // meet the level criterion, and the contact stress matches P to that accuracy.
+// The rotation gauges of the deformable disks hold while friction is off and
+// are released (zero torque) once it acts: friction then loads the disks with
+// torques that a gauge would otherwise carry.
 TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
   DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
   assign_deformable(packing, 0.5, 1);
   ProblemParameters p;
   p.friction = 0.2;
-  p.constrain_rotation = PETSC_FALSE;
+  p.constrain_rotation = PETSC_TRUE;
   p.ptc_move = 0.02;
   p.newton_max_move = 0.05;
   p.level_force_rtol = 1e-4;
@@ -269,6 +272,9 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
     // Unbalanced forces up to 1e-4 P <d> per unknown: the virial mean stress within 1e-3 P.
     EXPECT_NEAR(o.mean_stress, P, 1e-3 * P);
     EXPECT_GT(o.coordination, 2.0);
+    const double d = problem.MeanDiameter();
+    std::printf("  P/E = %g: largest gauge torque %.3e P <d>^2\n", P, problem.Summary().max_gauge_torque / (P * d * d));
+    if (level > 1) EXPECT_LE(problem.Summary().max_gauge_torque, 1e-12 * P * d * d) << "gauge not released under friction";
   }
 }
 

@@ -6,11 +6,17 @@
 //      d(u) = 1 / (1/d_min - u (1/d_min - 1/d_max)),  u ~ U(0, 1).
 // 2. A dense random packing of rigid frictionless disks in a box of four
 //    walls: random non-overlapping placement in a loose square box, then
-//    isotropic compression of soft (harmonic-overlap) disks by energy
-//    minimization (FIRE) while the walls move in, until the assembly jams
-//    at vanishing overlap. The result is the jammed state phi_0 (about 0.84
-//    in 2D, slightly less with walls) that the exact-contact solver then
-//    takes over.
+//    isotropic compression of soft (harmonic-overlap) disks under a
+//    pressure p applied to the four walls (enthalpy minimization by FIRE
+//    over the centres and the box lengths), p lowered until the assembly is
+//    jammed at vanishing overlap. The result is the jammed state phi_0
+//    (about 0.84 in 2D, slightly less with walls) under an isotropic stress,
+//    which the exact-contact solver then takes over: under its four
+//    pressure-driven walls it is an equilibrium with the same contacts.
+//    (A fixed square box would jam with an anisotropic stress, 10-20 %
+//    between sigma_xx and sigma_yy at 400 disks; the rigid packing then has
+//    to shear, by slow plastic rearrangement, before it carries an
+//    isotropic pressure.)
 // 3. A fraction kappa of the total particle area is turned deformable,
 //    homogeneously in space.
 // Everything is deterministic for a given seed.
@@ -29,9 +35,9 @@ struct DiskPacking {
 
 struct PackingOptions {
   double d_min = 0.8, d_max = 1.2;
-  double target_overlap = 1e-6;    // stop when the largest overlap / <d> is below this and the pressure vanishes
+  double target_overlap = 1e-6;    // lower the pressure until the largest overlap / <d> is below this
   double initial_fraction = 0.3;   // packing fraction of the loose initial state (0 < f <= 0.5)
-  int max_iterations = 2000000;    // FIRE iterations cap, per energy minimization (one box size)
+  int max_iterations = 2000000;    // FIRE iterations cap, per enthalpy minimization (one pressure)
 };
 
 // Diagnostics of one make_jammed_packing run.
@@ -42,22 +48,25 @@ struct JammingStats {
   double energy = 0;               // final soft energy, sum over overlaps of 0.5 delta^2 (delta in units of <d>)
   double max_overlap = 0;          // final largest overlap / <d> (pairs and walls)
   double residual_force = 0;       // final largest net force on a disk / mean contact force
+  double pressure = 0;             // final pressure p (units: overlap stiffness 1, forces = overlap lengths)
+  double stress_anisotropy = 0;    // final |sigma_xx - sigma_yy| / p
   double mean_diameter = 1;        // <d> of the sample
 };
 
 std::vector<double> sample_diameters(int n, unsigned seed, double d_min, double d_max);
 
 // Jammed frictionless packing of n disks; throws std::invalid_argument for n < 1
-// or inconsistent options. Protocol (O'Hern et al. 2003, with walls): random
-// sequential placement at opts.initial_fraction in the square box [0, L]^2,
-// then box-size steps in phi (start 0.01) with a FIRE minimization of the
-// harmonic overlap energy U = sum 1/2 delta^2 (pairs and the four fixed walls)
-// at each size; the step is halved whenever the state switches between
-// unjammed (no overlap left) and jammed (force-balanced with U > 0), until a
-// jammed state has max overlap <= opts.target_overlap <d>. Walls returned:
-// {0, L, 0, L}; disks may overlap each other or the walls by at most that.
-// Cost ~ linear in n (Verlet list built on a cell grid). Deterministic:
-// identical bytes for a given (n, seed, opts) on IEEE-754 doubles.
+// or inconsistent options. Protocol (O'Hern et al. 2003, pressure-controlled
+// with walls): random sequential placement at opts.initial_fraction in a
+// square box, then FIRE minimizations of the enthalpy H = U + p Lx Ly,
+// U = sum 1/2 delta^2 over the overlaps (pairs and the four walls), over the
+// centres and the box lengths Lx, Ly: first at p = 1e-2, then at pressures
+// lowered by up to a decade each until the largest overlap is <=
+// opts.target_overlap <d>. The result is force-balanced with an isotropic
+// stress p. Walls returned: {0, Lx, 0, Ly}; disks may overlap each other or
+// the walls by at most the target. Cost ~ linear in n (Verlet list built on
+// a cell grid). Deterministic: identical bytes for a given (n, seed, opts) on
+// IEEE-754 doubles.
 DiskPacking make_jammed_packing(int n, unsigned seed, const PackingOptions &opts);
 DiskPacking make_jammed_packing(int n, unsigned seed, const PackingOptions &opts, JammingStats *stats);
 

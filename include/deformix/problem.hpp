@@ -207,7 +207,7 @@ struct StateSummary {
   double wall_force[4] = {0, 0, 0, 0};     // sum of normal multipliers on each wall
   double min_multiplier = 0.0;             // most negative normal multiplier (>= -tol)
   double max_complementarity = 0.0;        // max |lambda_n g| over candidates
-  double max_gauge_torque = 0.0;           // max |mu_b| of the rotation gauges (0 at a true equilibrium)
+  double max_gauge_torque = 0.0;           // largest torque of the rotation gauges, mu_b * mean |X|^2 (0 at a true equilibrium)
   int active_contacts = 0;                 // candidates with lambda_n > 0
   int sliding_contacts = 0;
 };
