@@ -725,6 +725,12 @@ PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal snor
     *reason = SNES_CONVERGED_FNORM_ABS;
   } else if (it >= maxit) {
     *reason = SNES_DIVERGED_MAX_IT;
+  } else if (p->rho_anchor_ > 0.0 && it >= 6 && fnorm > 0.5 * p->fnorm0_) {
+    // Inside pseudo-transient continuation a converging inner solve has at
+    // least halved its residual after 6 iterations (measured: they converge
+    // in 2-7); one that has not is cycling (contact states or slip
+    // directions) and is cut short: the outer loop retries with more damping.
+    *reason = SNES_DIVERGED_DTOL;
   }
   PetscFunctionReturn(0);
 }
@@ -767,6 +773,27 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
   PetscInt lo, hi;
   PetscFunctionBeginUser;
   *changed = PETSC_FALSE;
+  // Active-set cycles: semismooth Newton can alternate between contact states
+  // (typically stick <-> slip of a contact on the edge of its cone), each
+  // linearization sending the iterate into the other's region. When the
+  // state at the current iterate repeats one of two or three iterations ago
+  // (and is not the last one), the step is halved, which lands between the
+  // two regions and breaks the cycle. States are compared on all ranks.
+  {
+    std::uint64_t h = 1469598103934665603ull;  // FNV-1a of the contact states
+    for (char a : p->active_now_) h = (h ^ static_cast<unsigned char>(a)) * 1099511628211ull;
+    std::vector<std::uint64_t> &hist = p->active_history_;
+    bool cycle = false;
+    for (size_t k = 2; k <= 3 && k <= hist.size(); ++k)
+      if (hist[hist.size() - k] == h && hist.back() != h) cycle = true;
+    hist.push_back(h);
+    if (hist.size() > 4) hist.erase(hist.begin());
+    if (cycle) {
+      PetscCall(VecScale(Y, 0.5));
+      *changed = PETSC_TRUE;
+      ++p->cycle_breaks_;
+    }
+  }
   const double cap = p->params_.newton_max_move * p->mean_diameter_;
   if (cap <= 0.0) PetscFunctionReturn(0);
   // Contacts open now that the linearized step would drive deep into
@@ -1136,6 +1163,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     anchor_.insert(anchor_.end(), w_, w_ + 4);
     PetscCall(PackState(z_));
     active_checked_.clear();
+    active_history_.clear();
     PetscCall(SNESSolve(snes_, nullptr, z_));
     ++report->inner_solves;
     PetscInt its;
