@@ -105,9 +105,9 @@ PetscErrorCode Run(MPI_Comm comm) {
   // 1. Options: everything is validated before anything is written.
   // Deformable disks rotate freely in a packing. A rotation gauge
   // (-constrain_rotation) cuts the Newton iterations of frictionless kappa =
-  // 0.8 (50 disks) by 4x, but the discrete disk is a 24-gon of boundary nodes
-  // whose contacts do exert torques: the gauges then carry up to 0.19 P <d>^2
-  // (20 disks, P/E = 1e-4), as much as friction would. Not the default.
+  // 0.8 (50 disks) by 4x, but the contacts of the discrete disk (its boundary
+  // nodes against neighbours) do exert torques: the gauges then carry up to
+  // 0.19 P <d>^2 (20 disks, P/E = 1e-4), as much as friction would. Not the default.
   params.constrain_rotation = PETSC_FALSE;
   // Packings have floppy modes (rattlers, free rotations, sliding before the
   // network closes): pseudo-transient continuation with full Newton steps.
