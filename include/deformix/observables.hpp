@@ -2,8 +2,8 @@
 //
 //   packing fraction  phi = (sum of current particle areas) / box area
 //   coordination      Z = 2 N_c / N_p, N_c the particle pairs carrying a
-//                     normal force (several node contacts between two
-//                     deformable disks count once); Z_nr the same without
+//                     normal force above 1e-5 P <d> (several node contacts
+//                     between two deformable disks count once); Z_nr the same without
 //                     rattlers: particles with fewer than 3 force-carrying
 //                     contacts (2 with friction), walls included, removed
 //                     iteratively
