@@ -791,7 +791,6 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
     if (cycle) {
       PetscCall(VecScale(Y, 0.5));
       *changed = PETSC_TRUE;
-      ++p->cycle_breaks_;
     }
   }
   const double cap = p->params_.newton_max_move * p->mean_diameter_;

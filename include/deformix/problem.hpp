@@ -384,7 +384,6 @@ class CompactionProblem {
   SNES snes_ = nullptr;
   std::vector<char> active_now_, active_checked_;
   std::vector<std::uint64_t> active_history_;  // hashes of the contact states of the last Newton iterates (LimitStep)
-  long cycle_breaks_ = 0;                      // Newton steps halved to break an active-set cycle
   bool inverted_ = false;
   double fnorm0_ = 0.0;
   double rho_anchor_ = 0.0;         // pseudo-transient weight (0: plain Newton)
