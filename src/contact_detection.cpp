@@ -1,6 +1,13 @@
 // Contact detection: candidate pairs within a margin, refreshed between load
 // steps (and after a solve that moved a point past its candidate set).
 //
+// Distribution: each rank runs the narrow phase (the per-node distances, the
+// whole cost) only for the pairs whose slave particle it owns, i.e. its own
+// particles against their neighbours (ghosts) found by the broad phase; the
+// candidates are then gathered on every rank (a few integers each), so every
+// rank holds the same list, sorted by RefreshCandidates into an order that does
+// not depend on the number of ranks.
+//
 // Broad phase: a uniform grid of cells of the size of the largest particle
 // bounding circle plus the margin; each particle is binned by its centre and
 // only the 3 x 3 neighbouring cells are searched, so the cost is linear in
@@ -52,6 +59,28 @@ void ClosestSegment(const std::vector<double> &xb, const double p[2], int *segme
 }  // namespace
 
 std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin) const {
+  std::vector<ContactCandidate> own = DetectOwnCandidates(margin);
+  if (size_ == 1) return own;
+  // Gather: 6 integers per candidate.
+  std::vector<int> send;
+  for (const ContactCandidate &c : own)
+    send.insert(send.end(), {static_cast<int>(c.type), c.body, c.point, static_cast<int>(c.wall), c.master, c.segment});
+  int count = static_cast<int>(send.size());
+  std::vector<int> counts(size_), displs(size_, 0);
+  MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
+  for (int r = 1; r < size_; ++r) displs[r] = displs[r - 1] + counts[r - 1];
+  std::vector<int> all(static_cast<size_t>(displs[size_ - 1] + counts[size_ - 1]));
+  MPI_Allgatherv(send.data(), count, MPI_INT, all.data(), counts.data(), displs.data(), MPI_INT, comm_);
+  std::vector<ContactCandidate> out(all.size() / 6);
+  for (size_t i = 0; i < out.size(); ++i) {
+    const int *v = &all[6 * i];
+    out[i].type = static_cast<ContactType>(v[0]), out[i].body = v[1], out[i].point = v[2];
+    out[i].wall = static_cast<Wall>(v[3]), out[i].master = v[4], out[i].segment = v[5];
+  }
+  return out;
+}
+
+std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double margin) const {
   std::vector<ContactCandidate> out;
   const double reach = margin * mean_diameter_;
 
@@ -80,6 +109,7 @@ std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin)
 
   // Walls.
   for (const Bound &bd : bounds) {
+    if (ParticleOwner(particle_of(bd)) != rank_) continue;
     if (bd.rigid) {
       double g[4];
       const double c[2] = {bd.x, bd.y};
@@ -140,6 +170,9 @@ std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin)
           // Each pair once, ordered by particle number: A (master) before B (slave).
           if (particle_of(bounds[j]) <= particle_of(bounds[i])) continue;
           const Bound &A = bounds[i], &B = bounds[j];
+          // The slave: the deformable disk of a rigid-deformable pair, else B.
+          const Bound &slave = A.rigid != B.rigid ? (A.rigid ? B : A) : B;
+          if (ParticleOwner(particle_of(slave)) != rank_) continue;
           if (std::hypot(B.x - A.x, B.y - A.y) - A.r - B.r >= reach) continue;
           if (A.rigid && B.rigid) {
             ContactCandidate cc;

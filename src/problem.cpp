@@ -59,6 +59,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "", constrain_rotation, &constrain_rotation, nullptr));
   PetscCall(PetscOptionsBool("-secant_predictor", "start each increment from the secant extrapolation of the last two states",
                              "", secant_predictor, &secant_predictor, nullptr));
+  PetscCall(PetscOptionsInt("-ptc_easy_its", "pseudo-transient continuation: double the move after an inner solve of at most this many Newton iterations",
+                            "", ptc_easy_its, &ptc_easy_its, nullptr));
   PetscCall(PetscOptionsInt("-ptc_max_steps", "pseudo-time steps per sub-step before it counts as failed (the load step is then cut)",
                             "", ptc_max_steps, &ptc_max_steps, nullptr));
   PetscCall(PetscOptionsReal("-level_force_rtol",
@@ -759,6 +761,30 @@ PetscErrorCode NewtonMonitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx)
   }
   PetscCall(PetscPrintf(PETSC_COMM_WORLD, "    newton %2" PetscInt_FMT "  |R| %.3e  closed contacts %d  sliding %d  rho_a %.1e%s\n",
                         it, (double)fnorm, closed, sliding, p->rho_anchor_, where));
+  // -newton_monitor_contacts: every contact whose state changed in the last
+  // iteration (the contacts of an active-set cycle), with its multipliers,
+  // gap and slip at the new iterate. Each rank lists the contacts it owns.
+  if (p->monitor_contacts_) {
+    const PetscScalar *za;
+    PetscCall(VecGetArrayRead(p->zall_, &za));
+    if (p->monitor_states_.size() == p->active_now_.size())
+      for (size_t c = 0; c < p->candidates_.size(); ++c) {
+        const ContactCandidate &cc = p->candidates_[c];
+        if (p->monitor_states_[c] == p->active_now_[c] || p->CandidateOwner(cc) != p->rank_) continue;
+        CompactionProblem::LocalContact lc;
+        p->ContactGeometry(cc, za, &lc);
+        const PetscInt lt = p->tangential_index_[c];
+        static const char *const names[] = {"open", "closed", "sliding"};
+        PetscCall(PetscSynchronizedPrintf(p->comm_,
+                                          "      contact %zu (type %d, slave %d point %d, master %d): %s -> %s  lambda_n %.3e  gap %.3e  lambda_t %.3e  slip %.3e\n",
+                                          c, (int)cc.type, cc.body, cc.point, cc.master, names[(int)p->monitor_states_[c]],
+                                          names[(int)p->active_now_[c]], za[p->MultiplierOffset() + c], lc.k.gap,
+                                          lt >= 0 ? za[lt] : 0.0, lc.k.slip));
+      }
+    PetscCall(PetscSynchronizedFlush(p->comm_, PETSC_STDOUT));
+    PetscCall(VecRestoreArrayRead(p->zall_, &za));
+    p->monitor_states_ = p->active_now_;
+  }
   PetscFunctionReturn(0);
 }
 
@@ -788,10 +814,7 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
       if (hist[hist.size() - k] == h && hist.back() != h) cycle = true;
     hist.push_back(h);
     if (hist.size() > 4) hist.erase(hist.begin());
-    if (cycle) {
-      PetscCall(VecScale(Y, 0.5));
-      *changed = PETSC_TRUE;
-    }
+    p->backtrack_ = cycle;  // the post-check (Backtrack) makes this step decrease |R|
   }
   const double cap = p->params_.newton_max_move * p->mean_diameter_;
   if (cap <= 0.0) PetscFunctionReturn(0);
@@ -842,6 +865,42 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
   PetscFunctionReturn(0);
 }
 
+// Line-search post-check: after an active-set cycle was detected (LimitStep),
+// the step W = X - Y is backtracked, alpha = 1, 1/2, ..., 1/64, until |R|
+// decreases (Armijo with the Newton slope -|R|^2, sigma = 1e-4); if no
+// fraction decreases it, the one with the smallest |R| is taken. Plain
+// semismooth Newton is non-monotone (a change of the active set may raise
+// |R| for one step), so this monotone safeguard is only used on cycles,
+// which it breaks: a cycle returns |R| to a value it had before.
+PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *changed_Y, PetscBool *changed_W, void *ctx) {
+  auto *p = static_cast<CompactionProblem *>(ctx);
+  PetscFunctionBeginUser;
+  *changed_Y = PETSC_FALSE;
+  *changed_W = PETSC_FALSE;
+  if (!p->backtrack_) PetscFunctionReturn(0);
+  p->backtrack_ = false;
+  PetscReal xnorm, fnorm, ynorm;
+  PetscCall(SNESLineSearchGetNorms(ls, &xnorm, &fnorm, &ynorm));
+  if (!p->work_) PetscCall(VecDuplicate(p->r_, &p->work_));
+  double best_alpha = 1.0, best_norm = INFINITY;
+  for (double alpha = 1.0; alpha >= 1.0 / 64; alpha *= 0.5) {
+    PetscCall(VecWAXPY(W, -alpha, Y, X));
+    PetscCall(FormFunction(nullptr, W, p->work_, p));
+    PetscReal norm;
+    PetscCall(VecNorm(p->work_, NORM_2, &norm));
+    if (p->inverted_) norm = INFINITY;
+    if (norm < best_norm) best_norm = norm, best_alpha = alpha;
+    if (norm <= (1.0 - 1e-4 * alpha) * fnorm) break;
+  }
+  PetscCall(VecWAXPY(W, -best_alpha, Y, X));
+  if (best_alpha < 1.0) {
+    PetscCall(VecScale(Y, best_alpha));
+    *changed_Y = PETSC_TRUE;
+    *changed_W = PETSC_TRUE;
+  }
+  PetscFunctionReturn(0);
+}
+
 PetscErrorCode CompactionProblem::DestroySolver() {
   PetscFunctionBeginUser;
   PetscCall(SNESDestroy(&snes_));
@@ -850,6 +909,7 @@ PetscErrorCode CompactionProblem::DestroySolver() {
   PetscCall(VecDestroy(&r_));
   PetscCall(VecDestroy(&zall_));
   PetscCall(VecDestroy(&yall_));
+  PetscCall(VecDestroy(&work_));
   PetscCall(VecDestroy(&fall_));
   PetscCall(VecScatterDestroy(&to_all_));
   PetscCall(VecScatterDestroy(&to_local_));
@@ -1014,10 +1074,12 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   }
   PetscBool monitor = PETSC_FALSE;
   PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-newton_monitor", &monitor, nullptr));
-  if (monitor) PetscCall(SNESMonitorSet(snes_, NewtonMonitor, this, nullptr));
+  PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-newton_monitor_contacts", &monitor_contacts_, nullptr));
+  if (monitor || monitor_contacts_) PetscCall(SNESMonitorSet(snes_, NewtonMonitor, this, nullptr));
   PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-ptc_monitor", &monitor_outer_, nullptr));
   PetscCall(SNESGetLineSearch(snes_, &ls));
   PetscCall(SNESLineSearchSetPreCheck(ls, LimitStep, this));
+  PetscCall(SNESLineSearchSetPostCheck(ls, Backtrack, this));
   PetscFunctionReturn(0);
 }
 
@@ -1280,7 +1342,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     // The paper's level criterion: unbalanced forces small compared with the
     // contact forces (P <d>), the packing fraction no longer changing, and
     // the contact conditions (Signorini, Coulomb) still satisfied exactly.
-    const double ncp_norm = std::sqrt(part[3] * part[3] + part[4] * part[4]);
+    const double ncp_norm = std::sqrt(part[3] + part[4]);  // part[] holds squared norms
     if (settled && params_.level_force_rtol > 0.0 && force_residual <= params_.level_force_rtol * pressure * mean_diameter_ &&
         ncp_norm <= atol && std::abs(phi - phi_last) <= params_.level_phi_rtol * phi) {
       report->relaxed = true;
@@ -1296,7 +1358,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       PetscFunctionReturn(0);
     }
     failures = 0;
-    if (its <= 5) move = std::min(2.0 * move, 1.0);
+    if (its <= params_.ptc_easy_its) move = std::min(2.0 * move, 1.0);
   }
   rho_anchor_ = 0.0;
   ncp_now_ = params_.ncp;

@@ -7,6 +7,8 @@
 //  - parallel assembly: the residual and the Jacobian (J v) of the
 //    distributed problem equal those of the same problem built on
 //    PETSC_COMM_SELF on each rank (a serial reference), at a perturbed state;
+//  - contact detection: each rank's narrow phase finds exactly the contacts
+//    whose slave it owns, and the gathered list is the serial one;
 //  - ghost data current: after a solve, the replicated state (used for
 //    geometry) is bitwise the same on every rank and equals the distributed
 //    solution.
@@ -192,6 +194,45 @@ TEST(Distribution, ResidualAndJacobianEqualTheSerialAssembly) {
   for (Vec *w : {&z, &F, &zs, &Fs, &vp, &vs, &Jv, &Jvs}) VecDestroy(w);
   MatDestroy(&J);
   MatDestroy(&Js);
+}
+
+// Contact detection on several ranks: each rank's narrow phase finds exactly
+// the candidates whose slave particle it owns, no rank finds one twice, and
+// the gathered list equals the serial detection on the same state.
+TEST(Distribution, EachRankDetectsTheContactsOfItsParticlesAndTheUnionIsTheSerialList) {
+  auto problem = Build(PETSC_COMM_WORLD);
+  auto serial = Build(PETSC_COMM_SELF);
+  ASSERT_TRUE(problem && serial);
+  Vec z;
+  ASSERT_PETSC(problem->CreateGlobalVector(&z));  // partition
+  VecDestroy(&z);
+  PetscMPIInt rank, size;
+  MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
+  MPI_Comm_size(PETSC_COMM_WORLD, &size);
+  const std::vector<int> &owner = problem->ParticleOwners();
+  if (size > 1) ASSERT_EQ(static_cast<int>(owner.size()), problem->NumParticles());
+  const double margin = problem->Parameters().contact_margin;
+  auto key = [](const ContactCandidate &c) {
+    return std::vector<int>{static_cast<int>(c.type), c.body, c.point, static_cast<int>(c.wall), c.master, c.segment};
+  };
+  const std::vector<ContactCandidate> own = problem->DetectOwnCandidates(margin);
+  for (const ContactCandidate &c : own) {
+    const int slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid
+                          ? problem->RigidBodies()[c.body].particle
+                          : problem->Bodies()[c.body].particle;
+    EXPECT_EQ(owner.empty() ? 0 : owner[slave], rank) << "rank " << rank << " detected a contact of particle " << slave;
+  }
+  int n_own = static_cast<int>(own.size()), n_sum = 0;
+  MPI_Allreduce(&n_own, &n_sum, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
+  std::vector<std::vector<int>> all, ref;
+  for (const ContactCandidate &c : problem->DetectCandidates(margin)) all.push_back(key(c));
+  for (const ContactCandidate &c : serial->DetectCandidates(margin)) ref.push_back(key(c));
+  std::sort(all.begin(), all.end());
+  std::sort(ref.begin(), ref.end());
+  EXPECT_EQ(n_sum, static_cast<int>(ref.size())) << "candidates detected on no rank or on two";
+  EXPECT_EQ(all, ref);
+  EXPECT_GT(ref.size(), 100u);
+  if (size > 1) EXPECT_GT(n_own, 0) << "rank " << rank << " detected nothing";
 }
 
 TEST(Distribution, ReplicatedStateIsCurrentOnEveryRankAfterASolve) {

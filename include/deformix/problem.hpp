@@ -104,6 +104,7 @@ struct ProblemParameters {
   double ncp_scale = 1.0;        // c_n = c_t = ncp_scale * E
   double prox_eta = 1e-8;        // smallest rho / E
   double ptc_move = 0.0;         // pseudo-transient continuation: move per pseudo-time step / <d> (0: plain Newton)
+  PetscInt ptc_easy_its = 8;     // the move doubles after an inner solve of at most this many Newton iterations
   PetscInt ptc_max_steps = 300;  // pseudo-time steps per sub-step before it counts as failed
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
@@ -291,6 +292,11 @@ class CompactionProblem {
   // Makes the current state the start of the load step (reference of the incremental slip).
   void MarkStepStart() { u_start_ = u_; }
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
+  // Candidates within margin x <d> at the current state: all of them (gathered
+  // on every rank; collective), or those found by this rank's narrow phase
+  // (the pairs whose slave particle it owns).
+  std::vector<ContactCandidate> DetectCandidates(double margin) const;
+  std::vector<ContactCandidate> DetectOwnCandidates(double margin) const;
   const std::vector<ContactCandidate> &Candidates() const { return candidates_; }
   const std::vector<double> &Multipliers() const { return lambda_; }
   const std::vector<double> &TangentialMultipliers() const { return lambda_t_; }
@@ -306,6 +312,7 @@ class CompactionProblem {
  private:
   friend PetscErrorCode FormFunction(SNES, Vec, Vec, void *);
   friend PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec, PetscBool *, void *);
+  friend PetscErrorCode Backtrack(SNESLineSearch, Vec, Vec, Vec, PetscBool *, PetscBool *, void *);
   friend PetscErrorCode FormJacobian(SNES, Vec, Mat, Mat, void *);
   friend PetscErrorCode NewtonMonitor(SNES, PetscInt, PetscReal, void *);
   friend PetscErrorCode ConvergenceTest(SNES, PetscInt, PetscReal, PetscReal, PetscReal, SNESConvergedReason *, void *);
@@ -328,7 +335,6 @@ class CompactionProblem {
                           std::vector<PetscScalar> *cv, bool *inverted, std::vector<char> *active);
   void Unpack(const double *z);
   void Pack(double *z) const;
-  std::vector<ContactCandidate> DetectCandidates(double margin) const;
   PetscErrorCode UpdatePartition();  // METIS partition of the particles for the current candidates
   int ParticleOwner(int particle) const { return particle_owner_.empty() ? 0 : particle_owner_[particle]; }
   int BodyOwner(int b) const { return ParticleOwner(bodies_[b].particle); }
@@ -376,6 +382,8 @@ class CompactionProblem {
   PetscInt own_lo_ = 0, own_hi_ = 0; // this rank's PETSc rows
   std::vector<int> particle_owner_;  // rank of each particle (empty: everything on rank 0)
   Vec yall_ = nullptr;               // replicated Newton step (LimitStep), allocated with the layout
+  Vec work_ = nullptr;               // residual at trial points of Backtrack
+  bool backtrack_ = false;           // LimitStep found an active-set cycle: Backtrack this step
   VecScatter to_all_ = nullptr;     // whole state, natural order (once per solve: replicated copy)
   VecScatter to_local_ = nullptr;   // own + ghost unknowns only (every Newton iteration; reverse: residual)
   PetscInt n_ghost_ = 0;            // unknowns this rank reads but does not own
@@ -392,6 +400,8 @@ class CompactionProblem {
   std::vector<PetscScalar> coo_values_;
   NcpFunction ncp_now_ = NcpFunction::Min;  // NCP function of the current inner solve (see Solve)
   PetscBool monitor_outer_ = PETSC_FALSE;  // -ptc_monitor: one line per pseudo-time step
+  PetscBool monitor_contacts_ = PETSC_FALSE;  // -newton_monitor_contacts: contacts that changed state
+  std::vector<char> monitor_states_;          // their states at the previous Newton iterate
   int layouts_created_ = 0;         // SetUpLayout calls (symbolic factorizations)
   PetscInt mumps_extra_ = 100;      // MUMPS ICNTL(14): extra workspace in percent (doubled after INFOG(1) = -9)
 };
