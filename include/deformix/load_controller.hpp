@@ -14,7 +14,7 @@ namespace deformix {
 
 struct LoadControlParameters {
   PetscInt max_cuts = 16;    // give up after this many halvings in a row (smallest step: jump / 2^max_cuts)
-  PetscInt easy_its = 5;     // grow the step after a sub-step that took at most this many Newton iterations
+  PetscInt easy_its = 8;     // grow the step after a sub-step that took at most this many Newton iterations (per inner solve)
   double growth = 2.0;       // step growth factor
   PetscBool monitor = PETSC_FALSE;  // one line per sub-step (-load_monitor)
   PetscErrorCode SetFromOptions(MPI_Comm comm);
