@@ -61,6 +61,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "", secant_predictor, &secant_predictor, nullptr));
   PetscCall(PetscOptionsInt("-ptc_easy_its", "pseudo-transient continuation: double the move after an inner solve of at most this many Newton iterations",
                             "", ptc_easy_its, &ptc_easy_its, nullptr));
+  PetscCall(PetscOptionsInt("-ptc_stall_its", "pseudo-transient continuation: an inner solve that has not halved its residual after this many Newton iterations is cut short and retried with more damping",
+                            "", ptc_stall_its, &ptc_stall_its, nullptr));
   PetscCall(PetscOptionsInt("-ptc_max_steps", "pseudo-time steps per sub-step before it counts as failed (the load step is then cut)",
                             "", ptc_max_steps, &ptc_max_steps, nullptr));
   PetscCall(PetscOptionsReal("-level_force_rtol",
@@ -727,7 +729,7 @@ PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal snor
     *reason = SNES_CONVERGED_FNORM_ABS;
   } else if (it >= maxit) {
     *reason = SNES_DIVERGED_MAX_IT;
-  } else if (p->rho_anchor_ > 0.0 && it >= 6 && fnorm > 0.5 * p->fnorm0_) {
+  } else if (p->rho_anchor_ > 0.0 && it >= p->params_.ptc_stall_its && fnorm > 0.5 * p->fnorm0_) {
     // Inside pseudo-transient continuation a converging inner solve has at
     // least halved its residual after 6 iterations (measured: they converge
     // in 2-7); one that has not is cycling (contact states or slip
