@@ -731,8 +731,8 @@ PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal snor
     *reason = SNES_DIVERGED_MAX_IT;
   } else if (p->rho_anchor_ > 0.0 && it >= p->params_.ptc_stall_its && fnorm > 0.5 * p->fnorm0_) {
     // Inside pseudo-transient continuation a converging inner solve has at
-    // least halved its residual after 6 iterations (measured: they converge
-    // in 2-7); one that has not is cycling (contact states or slip
+    // least halved its residual after ptc_stall_its (6) iterations (measured
+    // at 20-100 disks: they converge in 2-7); one that has not is cycling (contact states or slip
     // directions) and is cut short: the outer loop retries with more damping.
     *reason = SNES_DIVERGED_DTOL;
   }
@@ -881,12 +881,13 @@ PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *chan
   *changed_W = PETSC_FALSE;
   if (!p->backtrack_) PetscFunctionReturn(0);
   p->backtrack_ = false;
-  PetscReal xnorm, fnorm, ynorm;
+  PetscReal xnorm, fnorm, ynorm, lambda;
   PetscCall(SNESLineSearchGetNorms(ls, &xnorm, &fnorm, &ynorm));
+  PetscCall(SNESLineSearchGetLambda(ls, &lambda));  // W = X - lambda Y (1 for the basic line search)
   if (!p->work_) PetscCall(VecDuplicate(p->r_, &p->work_));
   double best_alpha = 1.0, best_norm = INFINITY;
   for (double alpha = 1.0; alpha >= 1.0 / 64; alpha *= 0.5) {
-    PetscCall(VecWAXPY(W, -alpha, Y, X));
+    PetscCall(VecWAXPY(W, -alpha * lambda, Y, X));
     PetscCall(FormFunction(nullptr, W, p->work_, p));
     PetscReal norm;
     PetscCall(VecNorm(p->work_, NORM_2, &norm));
@@ -894,7 +895,7 @@ PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *chan
     if (norm < best_norm) best_norm = norm, best_alpha = alpha;
     if (norm <= (1.0 - 1e-4 * alpha) * fnorm) break;
   }
-  PetscCall(VecWAXPY(W, -best_alpha, Y, X));
+  PetscCall(VecWAXPY(W, -best_alpha * lambda, Y, X));
   if (best_alpha < 1.0) {
     PetscCall(VecScale(Y, best_alpha));
     *changed_Y = PETSC_TRUE;
