@@ -57,10 +57,12 @@
 // sticking / sliding contacts did not change in the last iteration
 // (deal.II step-42's rule), or the last step was at round-off (a degenerate
 // contact, lambda_n = g = 0, may flip state forever at a converged point).
-// A Newton step that returns to the contact states of two or three iterations
-// ago is halved (active-set cycles, typically stick <-> slip on the edge of
-// the cone); inside pseudo-transient continuation an inner solve that has not
-// halved its residual in 6 iterations is cut short and retried with more damping.
+// A Newton step taken from contact states equal to those of two or three
+// iterations ago (an active-set cycle, typically stick <-> slip on the edge
+// of the cone) is backtracked until |R| decreases (LimitStep flags it, the
+// line-search post-check Backtrack shortens it); inside pseudo-transient
+// continuation an inner solve that has not halved its residual in
+// ptc_stall_its (6) iterations is cut short and retried with more damping.
 //
 // Parallel layout. Particles are the unit of ownership: METIS partitions the
 // particle graph (vertices weighted by unknowns, edges = contact candidates;
