@@ -161,6 +161,27 @@ std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double marg
     grid[static_cast<size_t>(iy) * nx + ix].push_back(i);
   }
 
+  // Boundary nodes of the deformable slave S against the curve of the deformable master M.
+  auto node_segment_candidates = [&](const Bound &M, const Bound &S) {
+    const std::vector<double> &xs = boundary[S.index], &xm = boundary[M.index];
+    for (int k = 0; k < static_cast<int>(xs.size() / 2); ++k) {
+      const double *p = &xs[2 * k];
+      if (std::hypot(p[0] - M.x, p[1] - M.y) - M.r >= reach) continue;
+      int segment = -1;
+      double gap = 0.0, xi = 0.0;
+      ClosestSegment(xm, p, &segment, &gap, &xi);
+      // A node deeper than half the master's radius is on the far side: not this pair.
+      if (gap < reach && gap > -0.5 * M.r) {
+        ContactCandidate cc;
+        cc.type = ContactType::NodeSegment, cc.master = M.index, cc.body = S.index, cc.point = k;
+        // The pair's window: the two master segments around the
+        // master boundary node nearest to the closest point.
+        cc.segment = (segment + (xi < 0.5 ? 0 : 1)) % static_cast<int>(xm.size() / 2);
+        out.push_back(cc);
+      }
+    }
+  };
+
   for (int i = 0; i < static_cast<int>(bounds.size()); ++i) {
     int ix, iy;
     cell_of(bounds[i], &ix, &iy);
@@ -170,15 +191,23 @@ std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double marg
           // Each pair once, ordered by particle number: A (master) before B (slave).
           if (particle_of(bounds[j]) <= particle_of(bounds[i])) continue;
           const Bound &A = bounds[i], &B = bounds[j];
+          if (std::hypot(B.x - A.x, B.y - A.y) - A.r - B.r >= reach) continue;
+          if (!A.rigid && !B.rigid) {
+            // Deformable pair: B's nodes against A's curve, and with
+            // -contact_two_pass also A's nodes against B's curve. Each pass
+            // belongs to the rank of its slave.
+            if (ParticleOwner(particle_of(B)) == rank_) node_segment_candidates(A, B);
+            if (params_.contact_two_pass && ParticleOwner(particle_of(A)) == rank_) node_segment_candidates(B, A);
+            continue;
+          }
           // The slave: the deformable disk of a rigid-deformable pair, else B.
           const Bound &slave = A.rigid != B.rigid ? (A.rigid ? B : A) : B;
           if (ParticleOwner(particle_of(slave)) != rank_) continue;
-          if (std::hypot(B.x - A.x, B.y - A.y) - A.r - B.r >= reach) continue;
           if (A.rigid && B.rigid) {
             ContactCandidate cc;
             cc.type = ContactType::RigidRigid, cc.master = A.index, cc.body = B.index;
             out.push_back(cc);
-          } else if (A.rigid || B.rigid) {
+          } else {
             const Bound &R = A.rigid ? A : B, &D = A.rigid ? B : A;
             const std::vector<double> &xb = boundary[D.index];
             for (int k = 0; k < static_cast<int>(xb.size() / 2); ++k)
@@ -187,24 +216,6 @@ std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double marg
                 cc.type = ContactType::RigidNode, cc.master = R.index, cc.body = D.index, cc.point = k;
                 out.push_back(cc);
               }
-          } else {
-            const std::vector<double> &xs = boundary[B.index], &xm = boundary[A.index];
-            for (int k = 0; k < static_cast<int>(xs.size() / 2); ++k) {
-              const double *p = &xs[2 * k];
-              if (std::hypot(p[0] - A.x, p[1] - A.y) - A.r >= reach) continue;
-              int segment = -1;
-              double gap = 0.0, xi = 0.0;
-              ClosestSegment(xm, p, &segment, &gap, &xi);
-              // A node deeper than half the master's radius is on the far side: not this pair.
-              if (gap < reach && gap > -0.5 * A.r) {
-                ContactCandidate cc;
-                cc.type = ContactType::NodeSegment, cc.master = A.index, cc.body = B.index, cc.point = k;
-                // The pair's window: the two master segments around the
-                // master boundary node nearest to the closest point.
-                cc.segment = (segment + (xi < 0.5 ? 0 : 1)) % static_cast<int>(xm.size() / 2);
-                out.push_back(cc);
-              }
-            }
           }
         }
   }

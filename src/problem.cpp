@@ -76,6 +76,10 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              newton_max_move, &newton_max_move, nullptr));
   PetscCall(PetscOptionsReal("-contact_margin", "contact candidates: gap below margin x mean diameter", "",
                              contact_margin, &contact_margin, nullptr));
+  PetscCall(PetscOptionsBool("-contact_two_pass",
+                             "deformable pairs: node-to-segment both ways (each disk's boundary nodes kept out of the other), "
+                             "instead of the higher-numbered disk's nodes only",
+                             "", contact_two_pass, &contact_two_pass, nullptr));
   PetscCall(PetscOptionsReal("-repartition_tol",
                              "MPI: repartition (METIS) when the edge cut can shrink by this fraction or the load imbalance "
                              "exceeds 1 + this (< 0: keep the first partition)",

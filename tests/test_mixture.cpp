@@ -282,6 +282,40 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
   }
 }
 
+// -contact_two_pass: in a frictionless all-deformable packing at P/E = 0.05 each
+// disk's boundary nodes are kept out of its neighbours both ways (one pass
+// leaves the master's nodes free to enter the slave; docs/validation.md).
+TEST(Mixture, TwoPassKeepsTheNodesOfBothDisksOut) {
+  DiskPacking packing = make_jammed_packing(12, 2, PackingOptions());
+  assign_deformable(packing, 1.0, 1);
+  ProblemParameters p;
+  p.constrain_rotation = PETSC_TRUE;
+  p.contact_two_pass = PETSC_TRUE;
+  p.ptc_move = 0.02;
+  p.newton_max_move = 0.05;
+  p.level_force_rtol = 1e-4;
+  p.ncp_scale = 0.01;
+  CompactionProblem problem(PETSC_COMM_WORLD);
+  ASSERT_PETSC(problem.SetParameters(p));
+  ASSERT_EQ(problem.AddPacking(packing, make_disk_mesh(1.0, 40, 2)), 12);
+  LoadControlParameters load;
+  double step = -1.0;
+  for (double P : {1e-3, 0.05}) {
+    LevelReport rep;
+    ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
+  }
+  int forward = 0, backward = 0;  // closed contacts of the higher / lower-numbered disk's nodes
+  for (const ContactForce &f : problem.ContactForces()) {
+    EXPECT_GE(f.gap, -1e-9 * problem.MeanDiameter()) << "penetration";
+    EXPECT_GE(f.normal_multiplier, -1e-12) << "tensile contact force";
+    if (f.type != ContactType::NodeSegment || f.normal_multiplier <= 0.0) continue;
+    (f.slave_particle > f.master_particle ? forward : backward) += 1;
+  }
+  EXPECT_GT(forward, 0);
+  EXPECT_GT(backward, 0) << "the second pass carries force";
+  EXPECT_NEAR(ComputeObservables(problem).mean_stress, 0.05, 1e-3 * 0.05);
+}
+
 }  // namespace
 
 int main(int argc, char **argv) {

@@ -113,6 +113,7 @@ struct ProblemParameters {
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
+  PetscBool contact_two_pass = PETSC_FALSE;  // deformable pairs: node-to-segment both ways (else the higher particle's nodes only)
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
   PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path
   double repartition_tol = 0.1;  // repartition when the new edge cut is smaller by this fraction or the imbalance exceeds 1 + this (< 0: never)
