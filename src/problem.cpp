@@ -98,6 +98,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCheck(prox_eta >= 0.0, comm, PETSC_ERR_USER_INPUT, "-prox_eta %g must be >= 0", prox_eta);
   PetscCheck(ptc_move >= 0.0 && ptc_move <= 1.0, comm, PETSC_ERR_USER_INPUT, "-ptc_move %g must be in [0, 1]", ptc_move);
   PetscCheck(ptc_max_steps >= 1, comm, PETSC_ERR_USER_INPUT, "-ptc_max_steps %" PetscInt_FMT " must be >= 1", ptc_max_steps);
+  PetscCheck(ptc_easy_its >= 0, comm, PETSC_ERR_USER_INPUT, "-ptc_easy_its %" PetscInt_FMT " must be >= 0", ptc_easy_its);
+  PetscCheck(ptc_stall_its >= 1, comm, PETSC_ERR_USER_INPUT, "-ptc_stall_its %" PetscInt_FMT " must be >= 1", ptc_stall_its);
   PetscCheck(level_force_rtol >= 0.0 && level_force_rtol < 1.0, comm, PETSC_ERR_USER_INPUT,
              "-level_force_rtol %g must be in [0, 1)", level_force_rtol);
   PetscCheck(level_phi_rtol > 0.0, comm, PETSC_ERR_USER_INPUT, "-level_phi_rtol %g must be positive", level_phi_rtol);
