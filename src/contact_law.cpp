@@ -8,6 +8,7 @@ namespace deformix {
 NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n) {
   NormalNcp r;
   const double cg = c_n * gap;
+  r.switch_margin = std::abs(lambda - cg);
   if (f == NcpFunction::Min) {
     // A tie (lambda = c_n g, e.g. a closed contact carrying no force yet) is
     // treated as active so that a touching wall is coupled to the body in the
@@ -47,6 +48,7 @@ TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double s
     return r;
   }
   const double bound = mu * a, trial = lambda_t - c_t * slip;
+  r.switch_margin = std::abs(std::abs(trial) - bound);
   // Stick needs a cone to stick in: with mu = 0 (friction switched off) a
   // zero trial (no slip, no tangential force, e.g. at the start of a step)
   // must not lock the tangential motion.
@@ -63,6 +65,17 @@ TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double s
   r.d_lambda_n = -sigma * mu;
   r.d_gap = sigma * mu * c_n;
   return r;
+}
+
+double changed_state_margin(const std::vector<char> &was, const std::vector<char> &now,
+                            const std::vector<double> &margins) {
+  double m = 0.0;
+  for (size_t c = 0; c < now.size(); ++c) {
+    if (was[c] == now[c]) continue;
+    const bool normal_switch = (was[c] == kOpen) != (now[c] == kOpen);
+    m = std::max(m, margins[2 * c + (normal_switch ? 0 : 1)]);
+  }
+  return m;
 }
 
 }  // namespace deformix

@@ -229,6 +229,29 @@ TEST(CoulombLaw, StickSlipAndOpenBranches) {
   EXPECT_DOUBLE_EQ(off.d_lambda_t, 1.0);
 }
 
+// Margins of the state switches and the degenerate-flip measure of the
+// Newton stopping rule (ConvergenceTest): each change of state is measured by
+// the quantity that decides it, at the new iterate.
+TEST(CoulombLaw, SwitchMarginsOfChangedStates) {
+  const double mu = 0.2, c = 2.0;
+  // Normal switch at lambda_n = c g: |1e-10 - 2 * 1e-11| = 8e-11.
+  EXPECT_NEAR(normal_ncp(NcpFunction::Min, 1e-10, 1e-11, c).switch_margin, 8e-11, 1e-24);
+  EXPECT_NEAR(normal_ncp(NcpFunction::FischerBurmeister, 0.5, 0.0, c).switch_margin, 0.5, 1e-15);
+  // Stick <-> slip at |lambda_t - c s| = mu (lambda_n - c g): |0.21 - 0.2| at lambda_n = 1.
+  EXPECT_NEAR(coulomb_ncp(0.21, 1.0, 0.0, 0.0, mu, c, c).switch_margin, 0.01, 1e-15);
+  EXPECT_NEAR(coulomb_ncp(0.1, 1.0, 0.0, 0.01, mu, c, c).switch_margin, 0.12, 1e-15);
+  EXPECT_EQ(coulomb_ncp(0.1, -1.0, 0.0, 0.01, mu, c, c).switch_margin, 0.0);  // open: no cone
+  // Three contacts; margins {normal, tangential} of contact c at 2c, 2c + 1.
+  const std::vector<double> m = {1e-3, 2e-3, 1e-12, 5e-1, 7e-1, 3e-13};
+  const std::vector<char> was = {kOpen, kClosed, kClosed};
+  EXPECT_EQ(changed_state_margin(was, was, m), 0.0) << "nothing changed";
+  EXPECT_EQ(changed_state_margin(was, {kOpen, kSliding, kClosed}, m), 5e-1) << "stick -> slip: tangential";
+  EXPECT_EQ(changed_state_margin(was, {kOpen, kClosed, kOpen}, m), 7e-1) << "closed -> open: normal";
+  EXPECT_EQ(changed_state_margin(was, {kSliding, kClosed, kClosed}, m), 1e-3) << "open -> sliding: normal";
+  EXPECT_EQ(changed_state_margin({kSliding, kClosed, kSliding}, {kOpen, kClosed, kClosed}, m), 1e-3)
+      << "the largest of sliding -> open (1e-3) and slip -> stick (3e-13)";
+}
+
 // A random 20-disk mixture (the compact driver's scene and protocol):
 // Signorini and Coulomb hold exactly at every contact, the unbalanced forces
 // meet the level criterion, and the contact stress matches P to that accuracy.
@@ -314,6 +337,49 @@ TEST(Mixture, TwoPassKeepsTheNodesOfBothDisksOut) {
   EXPECT_GT(forward, 0);
   EXPECT_GT(backward, 0) << "the second pass carries force";
   EXPECT_NEAR(ComputeObservables(problem).mean_stress, 0.05, 1e-3 * 0.05);
+}
+
+// Two-pass contact with friction: the two passes of a conforming contact
+// share its force in an indeterminate way, so at a converged point weakly
+// loaded nodes (lambda_n ~ 1e-10 E<d>) may flip between open, stick and slip
+// at every Newton step. Newton must still stop there (ConvergenceTest: flips
+// within 1e3 atol of their switch are degenerate) and every level converge,
+// with Signorini and Coulomb exact at every contact.
+TEST(Mixture, TwoPassWithFrictionConverges) {
+  DiskPacking packing = make_jammed_packing(12, 2, PackingOptions());
+  assign_deformable(packing, 1.0, 1);
+  ProblemParameters p;
+  p.friction = 0.2;
+  p.constrain_rotation = PETSC_TRUE;
+  p.contact_two_pass = PETSC_TRUE;
+  p.ptc_move = 0.02;
+  p.newton_max_move = 0.05;
+  p.level_force_rtol = 1e-4;
+  p.ncp_scale = 0.01;
+  CompactionProblem problem(PETSC_COMM_WORLD);
+  ASSERT_PETSC(problem.SetParameters(p));
+  ASSERT_EQ(problem.AddPacking(packing, make_disk_mesh(1.0, 40, 2)), 12);
+  LoadControlParameters load;
+  double step = -1.0;
+  int level = 0;
+  for (double P : {1e-3, 3e-3}) {
+    problem.SetFrictionActive(level++ > 0);
+    LevelReport rep;
+    ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
+    EXPECT_TRUE(rep.converged) << "P/E = " << P;
+    EXPECT_NEAR(problem.Pressure(), P, 1e-12 * P) << "level not reached";
+    std::printf("  two-pass, friction 0.2, P/E = %g: %" PetscInt_FMT " Newton iterations, %d cuts\n", P, rep.newton_its,
+                rep.cuts);
+    const double d = problem.MeanDiameter();
+    for (const ContactForce &f : problem.ContactForces()) {
+      EXPECT_GE(f.gap, -1e-9 * d) << "penetration";
+      // The Newton tolerance is 1e-11 E <d> on every row.
+      EXPECT_GE(f.normal_multiplier, -1e-10 * d) << "tensile contact force";
+      EXPECT_LE(std::abs(f.normal_multiplier * f.gap), 1e-10 * P * d) << "complementarity";
+      EXPECT_LE(std::abs(f.tangential_multiplier), 0.2 * f.normal_multiplier + 1e-10 * d) << "Coulomb cone";
+    }
+    EXPECT_NEAR(ComputeObservables(problem).mean_stress, P, 1e-3 * P);
+  }
 }
 
 }  // namespace

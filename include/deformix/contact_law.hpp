@@ -35,6 +35,8 @@
 // (1992); Hueber & Wohlmuth, CMAME 194 (2005) (primal-dual active set =
 // semismooth Newton).
 #pragma once
+
+#include <vector>
 #include <array>
 
 namespace deformix {
@@ -47,6 +49,7 @@ struct NormalNcp {
   double d_lambda = 0.0;  // dC / dlambda
   double d_gap = 0.0;     // dC / dg
   bool active = false;    // the constraint is treated as closed (g = 0) by this Newton step
+  double switch_margin = 0.0;  // |lambda - c_n g|: how far the state is from switching
 };
 
 NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n);
@@ -58,10 +61,21 @@ struct TangentialNcp {
   double value = 0.0;
   double d_lambda_t = 0.0, d_lambda_n = 0.0, d_gap = 0.0, d_slip = 0.0;
   ContactState state = kOpen;
+  double switch_margin = 0.0;  // | |lambda_t - c_t s| - mu a |: how far stick is from slip (0 when open)
 };
 
 TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double slip, double mu, double c_n,
                           double c_t);
+
+// Degenerate state changes. At a converged point a weakly active contact
+// (lambda_n = c_n g = 0, or |lambda_t| = mu lambda_n without slip) may
+// switch state at every Newton step: both linearizations hold there. Given
+// the states of n contacts at two iterates and, per contact, the margins
+// {normal, tangential} (2n values) at the second one, returns the largest
+// margin of a switch that happened: the normal margin for open <-> closed
+// or sliding, the tangential one for stick <-> slip (0 if nothing changed).
+double changed_state_margin(const std::vector<char> &was, const std::vector<char> &now,
+                            const std::vector<double> &margins);
 
 // Kinematics of one contact: the gap and its first derivatives with respect
 // to the global unknowns it depends on (at most kMaxDofs of them). A

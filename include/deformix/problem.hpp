@@ -108,7 +108,7 @@ struct ProblemParameters {
   double ptc_move = 0.0;         // pseudo-transient continuation: move per pseudo-time step / <d> (0: plain Newton)
   PetscInt ptc_easy_its = 8;     // the move doubles after an inner solve of at most this many Newton iterations
   PetscInt ptc_stall_its = 6;     // an inner solve that has not halved its residual after this many Newton iterations is cut short
-  PetscInt ptc_max_steps = 300;  // pseudo-time steps per sub-step before it counts as failed
+  PetscInt ptc_max_steps = 1000; // pseudo-time steps per sub-step before it counts as failed
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
@@ -395,6 +395,7 @@ class CompactionProblem {
   Mat J_ = nullptr;
   SNES snes_ = nullptr;
   std::vector<char> active_now_, active_checked_;
+  std::vector<double> switch_margin_;  // per candidate: |lambda_n - c_n g| and ||trial| - mu a| (own contacts; see ConvergenceTest)
   std::vector<std::uint64_t> active_history_;  // hashes of the contact states of the last Newton iterates (LimitStep)
   bool inverted_ = false;
   double fnorm0_ = 0.0;
