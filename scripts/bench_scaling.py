@@ -20,6 +20,9 @@ Outputs: --csv (default benchmarks/scaling.csv; '#' header lines: machine, MPI, 
 options) and --png (default benchmarks/scaling.png: seconds per level, efficiency, memory per rank).
 Run directories go under --out-dir (default out/scaling).
 
+With --merge it runs nothing and merges CSVs written by earlier invocations (for instance one rank
+count per invocation when the runs take hours), recomputing the efficiencies.
+
 Usage:
   /usr/bin/python3 scripts/bench_scaling.py --n-particles 64 --pressures 1e-4,1e-3 --ranks 1 2
   /usr/bin/python3 scripts/bench_scaling.py --n-particles 400 --ranks 1 2 4 --weak-per-rank 100 \\
@@ -137,7 +140,11 @@ def main():
     ap.add_argument("--mpiexec", default="mpirun")
     ap.add_argument("--mpiexec-args", default="--oversubscribe", help="options of mpiexec before the executable")
     ap.add_argument("--extra", default="", help="extra options for compact")
+    ap.add_argument("--merge", nargs="+", metavar="CSV", help="run nothing: merge CSVs of earlier runs of this script"
+                    " (e.g. 1 rank and 2 ranks measured separately), recompute the efficiencies, write --csv and --png")
     args = ap.parse_args()
+    if args.merge:
+        return merge(args.merge, args.csv, args.png)
     if not os.path.exists(args.compact):
         sys.exit(f"{args.compact} not found: build first (bash scripts/test.sh or cmake --build build)")
     for f in args.options_files:
@@ -212,6 +219,51 @@ def main():
     print("wrote", args.csv)
     plot(rows, args.png, f"compact N={args.n_particles} kappa={args.kappa:g} mu={args.friction:g} P/E={pressures}"
                          f"{f', weak {args.weak_per_rank}/rank' if args.weak_per_rank > 0 else ''}")
+
+
+def merge(paths, out_csv, out_png):
+    """--merge: the rows of several CSVs of this script in one, efficiencies against the smallest rank count."""
+    header, rows = [f"# merged by scripts/bench_scaling.py --merge from: {' '.join(paths)}\n"], []
+    for path in paths:
+        with open(path) as f:
+            lines = f.readlines()
+        header += [f"# [{os.path.basename(path)}] {ln[2:]}" for ln in lines if ln.startswith("#")]
+        body = list(csv.reader(ln for ln in lines if not ln.startswith("#")))
+        if not body or body[0] != COLS:
+            sys.exit(f"{path}: not a CSV of bench_scaling.py (its columns differ)")
+        rows += [[r[0], r[1], int(r[2]), int(r[3])] + r[4:] for r in body[1:]]
+    runs = {}
+    for r in rows:
+        runs.setdefault((r[0], r[1], r[2], r[3]), set()).add(r[5])  # wall seconds tell the runs apart
+    for run, walls in runs.items():
+        if len(walls) > 1:
+            sys.exit(f"--merge: {len(walls)} runs of mode {run[0]}, options {run[1]}, {run[2]} ranks, N = {run[3]}:"
+                     " merge one run per rank count")
+    for mode, opts in sorted({(r[0], r[1]) for r in rows}):
+        sel = [r for r in rows if (r[0], r[1]) == (mode, opts)]
+        r0 = min(r[2] for r in sel)
+        nlev = lambda rk: sum(1 for r in sel if r[2] == rk and r[8] not in ("all", ""))
+        key = lambda r: r[8] if r[8] != "all" else f"all{nlev(r[2])}"
+        ref = {key(r): (float(r[17]), float(r[18]) if r[18] else None) for r in sel if r[2] == r0 and r[17]}
+        for r in sel:
+            eff = effn = None
+            if r[17] and key(r) in ref:
+                s0, spn0 = ref[key(r)]
+                scale = r0 / r[2] if mode == "strong" else 1.0
+                eff = scale * s0 / float(r[17])
+                effn = scale * spn0 / float(r[18]) if spn0 and r[18] else None
+            r[19], r[20] = fmt(eff, "%.4f"), fmt(effn, "%.4f")
+    rows.sort(key=lambda r: (r[0], r[1], r[2]))
+    with open(out_csv, "w", newline="") as f:
+        f.writelines(header)
+        w = csv.writer(f)
+        w.writerow(COLS)
+        w.writerows(rows)
+    print("wrote", out_csv)
+    for r in rows:
+        print(f"{r[0]:6s} r={r[2]} N={r[3]} {r[4]:7s} level {r[8]:>3s} newton {r[12]:>6s} seconds {r[17]:>9s}"
+              f" s/newton {r[18]:>8s} eff {r[19]:>6s} eff/nwt {r[20]:>6s} maxMiB {r[6]}")
+    plot(rows, out_png, f"merged: {', '.join(os.path.basename(p) for p in paths)}")
 
 
 def plot(rows, png, title):

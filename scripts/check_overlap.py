@@ -54,8 +54,8 @@ def boundary_curve(coords, cells, samples=16, spline=False):
     while True:
         w, m = following[v]
         nodes += [v, m]
-        # Quadratic edge through v (t = 0), m (t = 1/2), w (t = 1).
-        curve.append(coords[v] * (1 - t) * (1 - 2 * t) + coords[m] * 4 * t * (1 - t) + coords[w] * t * (2 * t - 1))
+        if not spline:  # quadratic edge through v (t = 0), m (t = 1/2), w (t = 1)
+            curve.append(coords[v] * (1 - t) * (1 - 2 * t) + coords[m] * 4 * t * (1 - t) + coords[w] * t * (2 * t - 1))
         v = w
         if v == start:
             break

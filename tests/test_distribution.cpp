@@ -32,10 +32,11 @@ using namespace deformix;
 
 namespace {
 
-std::unique_ptr<CompactionProblem> Build(MPI_Comm comm) {
+std::unique_ptr<CompactionProblem> Build(MPI_Comm comm, bool two_pass = false) {
   DiskPacking packing = make_jammed_packing(30, 3, PackingOptions());
   assign_deformable(packing, 0.5, 3);
   ProblemParameters p;
+  p.contact_two_pass = two_pass ? PETSC_TRUE : PETSC_FALSE;
   p.friction = 0.3;
   p.constrain_rotation = PETSC_FALSE;
   p.ptc_move = 0.02;
@@ -148,9 +149,11 @@ TEST(Distribution, EveryParticleOwnedOnceAndNumberingContiguousPerRank) {
   VecDestroy(&z);
 }
 
-TEST(Distribution, ResidualAndJacobianEqualTheSerialAssembly) {
-  auto problem = Build(PETSC_COMM_WORLD);
-  auto serial = Build(PETSC_COMM_SELF);
+// Residual and J v of the distributed problem against the serial assembly
+// (one-pass or two-pass deformable contact).
+void CheckAssembly(bool two_pass) {
+  auto problem = Build(PETSC_COMM_WORLD, two_pass);
+  auto serial = Build(PETSC_COMM_SELF, two_pass);
   ASSERT_TRUE(problem && serial);
   Vec z, F, zs, Fs;
   ASSERT_PETSC(problem->CreateGlobalVector(&z));
@@ -190,18 +193,26 @@ TEST(Distribution, ResidualAndJacobianEqualTheSerialAssembly) {
   EXPECT_LE(dj, 1e-12 * scale) << "J v differs from the serial assembly";
   PetscMPIInt rank;
   MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
-  if (rank == 0) std::printf("  residual difference %.1e, J v difference %.1e (scale %.1e)\n", dr, dj, scale);
+  if (rank == 0)
+    std::printf("  %s: residual difference %.1e, J v difference %.1e (scale %.1e)\n", two_pass ? "two-pass" : "one pass",
+                dr, dj, scale);
   for (Vec *w : {&z, &F, &zs, &Fs, &vp, &vs, &Jv, &Jvs}) VecDestroy(w);
   MatDestroy(&J);
   MatDestroy(&Js);
 }
 
+TEST(Distribution, ResidualAndJacobianEqualTheSerialAssembly) { CheckAssembly(false); }
+TEST(Distribution, TwoPassResidualAndJacobianEqualTheSerialAssembly) { CheckAssembly(true); }
+
 // Contact detection on several ranks: each rank's narrow phase finds exactly
 // the candidates whose slave particle it owns, no rank finds one twice, and
 // the gathered list equals the serial detection on the same state.
-TEST(Distribution, EachRankDetectsTheContactsOfItsParticlesAndTheUnionIsTheSerialList) {
-  auto problem = Build(PETSC_COMM_WORLD);
-  auto serial = Build(PETSC_COMM_SELF);
+// With -contact_two_pass each pass of a deformable pair belongs to the rank
+// of its own slave, so the two passes of a pair cut by the partition are
+// detected on different ranks.
+void CheckDetection(bool two_pass) {
+  auto problem = Build(PETSC_COMM_WORLD, two_pass);
+  auto serial = Build(PETSC_COMM_SELF, two_pass);
   ASSERT_TRUE(problem && serial);
   Vec z;
   ASSERT_PETSC(problem->CreateGlobalVector(&z));  // partition
@@ -233,7 +244,18 @@ TEST(Distribution, EachRankDetectsTheContactsOfItsParticlesAndTheUnionIsTheSeria
   EXPECT_EQ(all, ref);
   EXPECT_GT(ref.size(), 100u);
   if (size > 1) EXPECT_GT(n_own, 0) << "rank " << rank << " detected nothing";
+  if (two_pass) {  // both passes present: some pair (A, B) also appears as (B, A)
+    bool reversed = false;
+    for (const std::vector<int> &c : ref)
+      if (c[0] == static_cast<int>(ContactType::NodeSegment))
+        for (const std::vector<int> &d : ref)
+          reversed = reversed || (d[0] == c[0] && d[1] == c[4] && d[4] == c[1]);
+    EXPECT_TRUE(reversed) << "no deformable pair detected both ways";
+  }
 }
+
+TEST(Distribution, EachRankDetectsTheContactsOfItsParticlesAndTheUnionIsTheSerialList) { CheckDetection(false); }
+TEST(Distribution, TwoPassDetectionOnEachRankUnitesToTheSerialList) { CheckDetection(true); }
 
 TEST(Distribution, ReplicatedStateIsCurrentOnEveryRankAfterASolve) {
   auto problem = Build(PETSC_COMM_WORLD);

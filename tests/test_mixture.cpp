@@ -305,22 +305,31 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
   }
 }
 
-// -contact_two_pass: in a frictionless all-deformable packing at P/E = 0.05 each
-// disk's boundary nodes are kept out of its neighbours both ways (one pass
-// leaves the master's nodes free to enter the slave; docs/validation.md).
-TEST(Mixture, TwoPassKeepsTheNodesOfBothDisksOut) {
+// A 12-disk all-deformable packing (40-triangle disks) with two-pass
+// deformable contact and the compact driver's solver settings.
+std::unique_ptr<CompactionProblem> TwoPassPacking(double friction) {
   DiskPacking packing = make_jammed_packing(12, 2, PackingOptions());
   assign_deformable(packing, 1.0, 1);
   ProblemParameters p;
+  p.friction = friction;
   p.constrain_rotation = PETSC_TRUE;
   p.contact_two_pass = PETSC_TRUE;
   p.ptc_move = 0.02;
   p.newton_max_move = 0.05;
   p.level_force_rtol = 1e-4;
   p.ncp_scale = 0.01;
-  CompactionProblem problem(PETSC_COMM_WORLD);
-  ASSERT_PETSC(problem.SetParameters(p));
-  ASSERT_EQ(problem.AddPacking(packing, make_disk_mesh(1.0, 40, 2)), 12);
+  auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
+  if (problem->SetParameters(p) || problem->AddPacking(packing, make_disk_mesh(1.0, 40, 2)) != 12) return nullptr;
+  return problem;
+}
+
+// -contact_two_pass: in a frictionless all-deformable packing at P/E = 0.05 each
+// disk's boundary nodes are kept out of its neighbours both ways (one pass
+// leaves the master's nodes free to enter the slave; docs/validation.md).
+TEST(Mixture, TwoPassKeepsTheNodesOfBothDisksOut) {
+  auto owner = TwoPassPacking(0.0);
+  ASSERT_TRUE(owner);
+  CompactionProblem &problem = *owner;
   LoadControlParameters load;
   double step = -1.0;
   for (double P : {1e-3, 0.05}) {
@@ -346,19 +355,9 @@ TEST(Mixture, TwoPassKeepsTheNodesOfBothDisksOut) {
 // within 1e3 atol of their switch are degenerate) and every level converge,
 // with Signorini and Coulomb exact at every contact.
 TEST(Mixture, TwoPassWithFrictionConverges) {
-  DiskPacking packing = make_jammed_packing(12, 2, PackingOptions());
-  assign_deformable(packing, 1.0, 1);
-  ProblemParameters p;
-  p.friction = 0.2;
-  p.constrain_rotation = PETSC_TRUE;
-  p.contact_two_pass = PETSC_TRUE;
-  p.ptc_move = 0.02;
-  p.newton_max_move = 0.05;
-  p.level_force_rtol = 1e-4;
-  p.ncp_scale = 0.01;
-  CompactionProblem problem(PETSC_COMM_WORLD);
-  ASSERT_PETSC(problem.SetParameters(p));
-  ASSERT_EQ(problem.AddPacking(packing, make_disk_mesh(1.0, 40, 2)), 12);
+  auto owner = TwoPassPacking(0.2);
+  ASSERT_TRUE(owner);
+  CompactionProblem &problem = *owner;
   LoadControlParameters load;
   double step = -1.0;
   int level = 0;
