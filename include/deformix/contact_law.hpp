@@ -36,8 +36,8 @@
 // semismooth Newton).
 #pragma once
 
-#include <vector>
 #include <array>
+#include <vector>
 
 namespace deformix {
 

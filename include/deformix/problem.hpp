@@ -55,8 +55,11 @@
 //
 // Newton stops only when |R| is below tolerance AND the set of open /
 // sticking / sliding contacts did not change in the last iteration
-// (deal.II step-42's rule), or the last step was at round-off (a degenerate
-// contact, lambda_n = g = 0, may flip state forever at a converged point).
+// (deal.II step-42's rule), or the last step was at round-off, or every
+// contact that changed is within 1e3 atol of its switch: a degenerate
+// contact (lambda_n = c_n g = 0, or |lambda_t| = mu lambda_n without slip)
+// may flip state forever at a converged point, where both of its states'
+// equations hold (contact_law.hpp, changed_state_margin).
 // A Newton step taken from contact states equal to those of two or three
 // iterations ago (an active-set cycle, typically stick <-> slip on the edge
 // of the cone) is backtracked until |R| decreases (LimitStep flags it, the
