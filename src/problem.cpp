@@ -727,13 +727,15 @@ PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal snor
   int changed_any = changed ? 1 : 0;
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &changed_any, 1, MPI_INT, MPI_MAX, p->comm_));
   // How far from its switch is the most decided of the contacts that changed
-  // state (each rank knows the margins of those it owns, the others are 0).
+  // state (each rank knows the margins of those it owns, the others are 0;
+  // changed_any is the same on every rank, so the reduction is collective).
   double changed_margin = 0.0;
-  if (changed_any)
+  if (changed_any) {
     changed_margin = p->active_checked_.size() == p->active_now_.size()
                          ? changed_state_margin(p->active_checked_, p->active_now_, p->switch_margin_)
                          : INFINITY;
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &changed_margin, 1, MPI_DOUBLE, MPI_MAX, p->comm_));
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &changed_margin, 1, MPI_DOUBLE, MPI_MAX, p->comm_));
+  }
   p->active_checked_ = p->active_now_;
   *reason = SNES_CONVERGED_ITERATING;
   if (it == 0) p->fnorm0_ = fnorm;
