@@ -80,6 +80,10 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "deformable pairs: node-to-segment both ways (each disk's boundary nodes kept out of the other), "
                              "instead of the higher-numbered disk's nodes only",
                              "", contact_two_pass, &contact_two_pass, nullptr));
+  PetscCall(PetscOptionsBool("-contact_mortar",
+                             "deformable pairs: the slave node's gap integrated over the slave boundary around it "
+                             "(mortar weighted gap, so the master cannot enter between slave nodes) instead of the node's own gap",
+                             "", contact_mortar, &contact_mortar, nullptr));
   PetscCall(PetscOptionsReal("-repartition_tol",
                              "MPI: repartition (METIS) when the edge cut can shrink by this fraction or the load imbalance "
                              "exceeds 1 + this (< 0: keep the first partition)",
@@ -104,6 +108,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
              "-level_force_rtol %g must be in [0, 1)", level_force_rtol);
   PetscCheck(level_phi_rtol > 0.0, comm, PETSC_ERR_USER_INPUT, "-level_phi_rtol %g must be positive", level_phi_rtol);
   PetscCheck(newton_max_move >= 0.0, comm, PETSC_ERR_USER_INPUT, "-newton_max_move %g must be >= 0", newton_max_move);
+  PetscCheck(!(contact_mortar && contact_two_pass), comm, PETSC_ERR_USER_INPUT,
+             "-contact_mortar and -contact_two_pass exclude each other (two mortar passes over-constrain the contact): choose one");
   PetscCheck(contact_margin > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_margin %g must be positive", contact_margin);
   PetscFunctionReturn(0);
 }
@@ -426,6 +432,7 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
   lc->frictional = HasTangential(c);
   lc->curved = false;
   lc->beyond = 0;
+  lc->slave_nodes = 1;
   lc->k = PairKinematics();
   for (PetscInt &d : lc->dofs) d = -1;
   switch (c.type) {
@@ -477,6 +484,23 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       const int nb = static_cast<int>(m.boundary.size());
       // The master boundary around its node `segment`: five nodes, the smooth
       // master curve on the two segments around it.
+      if (params_.contact_mortar) {
+        // Mortar: seven master nodes around `segment`, the slave nodes point-2 .. point+2.
+        const DiskMesh &s = bodies_[c.body].mesh;
+        const int ns = static_cast<int>(s.boundary.size());
+        for (int j = -3; j <= 3; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
+        for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
+        MortarSupport support;
+        support.order = s.order;
+        support.vertex = s.order == 1 || c.point % 2 == 0;
+        for (int side = 0; side < 2; ++side) {
+          const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
+          support.length[side] = std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
+        }
+        lc->k = mortar_node(q, q0, support, hessians, &lc->beyond);
+        lc->slave_xy = 14, lc->slave_nodes = 5;
+        break;
+      }
       for (int j = -2; j <= 2; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
       add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
       lc->k = curve_node(q, q0, hessians, &lc->beyond);
@@ -1440,8 +1464,9 @@ std::vector<ContactForce> CompactionProblem::ContactForces() const {
     f.master_particle = MasterParticle(cc);
     if (lc.slave_xy >= 0) {
       // Generalized force on the slave's translation: lambda_n dg/dx + lambda_t ds/dx.
-      for (int i = 0; i < 2; ++i)
-        f.force[i] = lambda_[c] * lc.k.dgap[lc.slave_xy + i] + lambda_t_[c] * lc.k.dslip[lc.slave_xy + i];
+      for (int a = 0; a < lc.slave_nodes; ++a)
+        for (int i = 0; i < 2; ++i)
+          f.force[i] += lambda_[c] * lc.k.dgap[lc.slave_xy + 2 * a + i] + lambda_t_[c] * lc.k.dslip[lc.slave_xy + 2 * a + i];
       if (cc.type == ContactType::RigidRigid) {
         double xa[2];
         RigidPosition(cc.master, xa, nullptr);

@@ -32,11 +32,16 @@ using namespace deformix;
 
 namespace {
 
-std::unique_ptr<CompactionProblem> Build(MPI_Comm comm, bool two_pass = false) {
+// Deformable-deformable contact: one node-to-segment pass, two, or the mortar gap.
+enum class Pass { One, Two, Mortar };
+const char *Name(Pass pass) { return pass == Pass::One ? "one pass" : pass == Pass::Two ? "two-pass" : "mortar"; }
+
+std::unique_ptr<CompactionProblem> Build(MPI_Comm comm, Pass pass = Pass::One) {
   DiskPacking packing = make_jammed_packing(30, 3, PackingOptions());
   assign_deformable(packing, 0.5, 3);
   ProblemParameters p;
-  p.contact_two_pass = two_pass ? PETSC_TRUE : PETSC_FALSE;
+  p.contact_two_pass = pass == Pass::Two ? PETSC_TRUE : PETSC_FALSE;
+  p.contact_mortar = pass == Pass::Mortar ? PETSC_TRUE : PETSC_FALSE;
   p.friction = 0.3;
   p.constrain_rotation = PETSC_FALSE;
   p.ptc_move = 0.02;
@@ -150,10 +155,10 @@ TEST(Distribution, EveryParticleOwnedOnceAndNumberingContiguousPerRank) {
 }
 
 // Residual and J v of the distributed problem against the serial assembly
-// (one-pass or two-pass deformable contact).
-void CheckAssembly(bool two_pass) {
-  auto problem = Build(PETSC_COMM_WORLD, two_pass);
-  auto serial = Build(PETSC_COMM_SELF, two_pass);
+// (one-pass, two-pass or mortar deformable contact).
+void CheckAssembly(Pass pass) {
+  auto problem = Build(PETSC_COMM_WORLD, pass);
+  auto serial = Build(PETSC_COMM_SELF, pass);
   ASSERT_TRUE(problem && serial);
   Vec z, F, zs, Fs;
   ASSERT_PETSC(problem->CreateGlobalVector(&z));
@@ -194,15 +199,16 @@ void CheckAssembly(bool two_pass) {
   PetscMPIInt rank;
   MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
   if (rank == 0)
-    std::printf("  %s: residual difference %.1e, J v difference %.1e (scale %.1e)\n", two_pass ? "two-pass" : "one pass",
+    std::printf("  %s: residual difference %.1e, J v difference %.1e (scale %.1e)\n", Name(pass),
                 dr, dj, scale);
   for (Vec *w : {&z, &F, &zs, &Fs, &vp, &vs, &Jv, &Jvs}) VecDestroy(w);
   MatDestroy(&J);
   MatDestroy(&Js);
 }
 
-TEST(Distribution, ResidualAndJacobianEqualTheSerialAssembly) { CheckAssembly(false); }
-TEST(Distribution, TwoPassResidualAndJacobianEqualTheSerialAssembly) { CheckAssembly(true); }
+TEST(Distribution, ResidualAndJacobianEqualTheSerialAssembly) { CheckAssembly(Pass::One); }
+TEST(Distribution, TwoPassResidualAndJacobianEqualTheSerialAssembly) { CheckAssembly(Pass::Two); }
+TEST(Distribution, MortarResidualAndJacobianEqualTheSerialAssembly) { CheckAssembly(Pass::Mortar); }
 
 // Contact detection on several ranks: each rank's narrow phase finds exactly
 // the candidates whose slave particle it owns, no rank finds one twice, and
@@ -211,8 +217,8 @@ TEST(Distribution, TwoPassResidualAndJacobianEqualTheSerialAssembly) { CheckAsse
 // of its own slave, so the two passes of a pair cut by the partition are
 // detected on different ranks.
 void CheckDetection(bool two_pass) {
-  auto problem = Build(PETSC_COMM_WORLD, two_pass);
-  auto serial = Build(PETSC_COMM_SELF, two_pass);
+  auto problem = Build(PETSC_COMM_WORLD, two_pass ? Pass::Two : Pass::One);
+  auto serial = Build(PETSC_COMM_SELF, two_pass ? Pass::Two : Pass::One);
   ASSERT_TRUE(problem && serial);
   Vec z;
   ASSERT_PETSC(problem->CreateGlobalVector(&z));  // partition

@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 #include <petscsnes.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <random>
@@ -36,14 +37,16 @@ namespace {
 
 // n x n disks of diameter 1 on a unit square grid; pattern(i, j) says which are deformable.
 template <class Pattern>
-std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern deformable) {
+std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern deformable, bool mortar = false,
+                                           int triangles = 92) {
   ProblemParameters p;
   p.friction = friction;
+  p.contact_mortar = mortar ? PETSC_TRUE : PETSC_FALSE;
   p.constrain_rotation = PETSC_FALSE;
   p.ptc_move = 0.02;  // as the compact driver: pseudo-transient continuation
   auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
   if (problem->SetParameters(p)) return nullptr;
-  const DiskMesh mesh = make_disk_mesh(0.5, 92, 2);
+  const DiskMesh mesh = make_disk_mesh(0.5, triangles, 2);
   for (int i = 0; i < n; ++i)
     for (int j = 0; j < n; ++j) {
       if (deformable(i, j)) problem->AddDeformableBody(mesh, i + 0.5, j + 0.5);
@@ -124,9 +127,8 @@ TEST(Mixture, AllDeformableLatticeUsesNodeSegmentContacts) {
   CheckSignoriniCoulomb(*problem, 0.02, "deformable lattice");
 }
 
-// Jacobian of a frictional checkerboard (every pair type) vs central differences.
-TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
-  auto problem = Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; });
+// Jacobian of a converged, then perturbed, frictional lattice vs central differences.
+void CheckJacobian(std::unique_ptr<CompactionProblem> problem, const char *label) {
   ASSERT_TRUE(problem);
   LoadControlParameters load;
   double step = -1.0;
@@ -189,8 +191,8 @@ TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
     ASSERT_PETSC(VecRestoreArrayRead(Fp, &fp));
     ASSERT_PETSC(VecRestoreArrayRead(Fm, &fm));
   }
-  std::printf("frictional mixture: %" PetscInt_FMT " unknowns, worst |J - FD| = %.2e (scale %.2e), %d columns skipped\n",
-              n, worst, scale, skipped);
+  std::printf("%s: %" PetscInt_FMT " unknowns, worst |J - FD| = %.2e (scale %.2e), %d columns skipped\n",
+              label, n, worst, scale, skipped);
   EXPECT_LT(worst, 1e-5 * scale);
   EXPECT_LT(skipped, n / 10);
   MatDestroy(&J);
@@ -198,6 +200,16 @@ TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
   VecDestroy(&F);
   VecDestroy(&Fp);
   VecDestroy(&Fm);
+}
+
+// A checkerboard has every pair type but deformable-deformable.
+TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
+  CheckJacobian(Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; }), "frictional checkerboard");
+}
+
+// Four deformable disks in contact through the mortar gap (-contact_mortar).
+TEST(Mixture, MortarFrictionalJacobianMatchesFiniteDifferences) {
+  CheckJacobian(Lattice(2, 0.4, [](int, int) { return true; }, true, 40), "frictional mortar lattice");
 }
 
 TEST(CoulombLaw, StickSlipAndOpenBranches) {
@@ -379,6 +391,95 @@ TEST(Mixture, TwoPassWithFrictionConverges) {
     }
     EXPECT_NEAR(ComputeObservables(problem).mean_stress, P, 1e-3 * P);
   }
+}
+
+// Deepest point of any deformable disk's boundary inside another deformable
+// disk, measured on the element geometry itself (each quadratic boundary
+// edge sampled at 16 points): an independent check of the contact
+// treatment, which works on nodes and on the smooth contact curves.
+double DeepestBoundaryOverlap(const CompactionProblem &problem) {
+  const std::vector<DeformableBody> &bodies = problem.Bodies();
+  std::vector<std::vector<double>> outline(bodies.size());
+  for (size_t b = 0; b < bodies.size(); ++b) {
+    const DiskMesh &m = bodies[b].mesh;
+    const int nb = static_cast<int>(m.boundary.size()), step = m.order;
+    for (int i = 0; i < nb; i += step) {
+      double x[3][2];
+      for (int k = 0; k <= step; ++k) problem.NodePosition(static_cast<int>(b), m.boundary[(i + k) % nb], x[k]);
+      for (int s = 0; s < 16; ++s) {
+        const double t = s / 16.0;
+        const double N[3] = {(1 - t) * (1 - 2 * t), 4 * t * (1 - t), t * (2 * t - 1)};
+        for (int c = 0; c < 2; ++c)
+          outline[b].push_back(step == 1 ? (1 - t) * x[0][c] + t * x[1][c] : N[0] * x[0][c] + N[1] * x[1][c] + N[2] * x[2][c]);
+      }
+    }
+  }
+  double deepest = 0.0;
+  for (size_t a = 0; a < bodies.size(); ++a)
+    for (size_t b = 0; b < bodies.size(); ++b) {
+      if (a == b) continue;
+      const std::vector<double> &poly = outline[b];
+      const int n = static_cast<int>(poly.size() / 2);
+      for (size_t k = 0; k < outline[a].size() / 2; ++k) {
+        const double px = outline[a][2 * k], py = outline[a][2 * k + 1];
+        bool inside = false;
+        double dist = 1e300;
+        for (int i = 0, j = n - 1; i < n; j = i++) {
+          const double xi = poly[2 * i], yi = poly[2 * i + 1], xj = poly[2 * j], yj = poly[2 * j + 1];
+          if ((yi > py) != (yj > py) && px < (xj - xi) * (py - yi) / (yj - yi) + xi) inside = !inside;
+          const double ex = xi - xj, ey = yi - yj, l2 = ex * ex + ey * ey;
+          const double t = l2 > 0 ? std::clamp(((px - xj) * ex + (py - yj) * ey) / l2, 0.0, 1.0) : 0.0;
+          dist = std::min(dist, std::hypot(px - xj - t * ex, py - yj - t * ey));
+        }
+        if (inside) deepest = std::max(deepest, dist);
+      }
+    }
+  return deepest;
+}
+
+// -contact_mortar: the weighted gap integrates each slave node's gap over
+// the slave boundary around it, so a master corner cannot enter the slave
+// between its nodes. The same frictionless 12-disk packing taken to
+// P/E = 0.1 with one-pass node-to-segment contact and with the mortar gap:
+// the boundaries of the disks overlap less with the mortar gap (measured:
+// 1.3e-2 and 7.1e-3 <d>; on these coarse 54-triangle disks the cell-average
+// condition itself allows ~1e-3 <d> at point contacts, mortar_kinematics.cpp),
+// and the level is an equilibrium (contact stress = P, multipliers >= 0).
+TEST(Mixture, MortarGapKeepsTheBoundariesApart) {
+  double overlap[2] = {0.0, 0.0};
+  for (int mortar = 0; mortar < 2; ++mortar) {
+    DiskPacking packing = make_jammed_packing(12, 2, PackingOptions());
+    assign_deformable(packing, 1.0, 1);
+    ProblemParameters p;
+    p.constrain_rotation = PETSC_TRUE;
+    p.contact_mortar = mortar ? PETSC_TRUE : PETSC_FALSE;
+    p.ptc_move = 0.02;
+    p.newton_max_move = 0.05;
+    p.level_force_rtol = 1e-4;
+    p.ncp_scale = 0.01;
+    CompactionProblem problem(PETSC_COMM_WORLD);
+    ASSERT_PETSC(problem.SetParameters(p));
+    ASSERT_EQ(problem.AddPacking(packing, make_disk_mesh(1.0, 40, 2)), 12);
+    LoadControlParameters load;
+    double step = -1.0;
+    PetscInt its = 0;
+    for (double P : {1e-3, 0.02, 0.1}) {
+      LevelReport rep;
+      ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
+      ASSERT_TRUE(rep.converged) << "P/E = " << P;
+      its += rep.newton_its;
+    }
+    const double d = problem.MeanDiameter();
+    for (const ContactForce &f : problem.ContactForces()) {
+      EXPECT_GE(f.normal_multiplier, -1e-10 * d) << "tensile contact force";
+      EXPECT_GE(f.gap, -1e-9 * d) << "the constrained (weighted) gap is negative";
+    }
+    EXPECT_NEAR(ComputeObservables(problem).mean_stress, 0.1, 1e-3 * 0.1);
+    overlap[mortar] = DeepestBoundaryOverlap(problem) / d;
+    std::printf("  %s: deepest boundary overlap %.2e <d> at P/E = 0.1, %" PetscInt_FMT " Newton iterations\n",
+                mortar ? "mortar" : "node-to-segment", overlap[mortar], its);
+  }
+  EXPECT_LT(overlap[1], 0.7 * overlap[0]);
 }
 
 }  // namespace

@@ -58,7 +58,7 @@
 namespace deformix {
 
 struct PairKinematics {
-  static constexpr int kMaxDofs = 12;
+  static constexpr int kMaxDofs = 24;
   int ndof = 0;                             // number of local unknowns of the pair
   double gap = 0.0;
   double slip = 0.0;                        // incremental tangential slip s
@@ -99,5 +99,25 @@ PairKinematics segment_node(const double q[6], const double q0[6]);
 // Degenerate input (collapsed tangent, or no closest point: a node far on
 // the concave side) gives a zero normal and zero derivatives.
 PairKinematics curve_node(const double q[12], const double q0[12], bool hessians = true, int *beyond = nullptr);
+
+// Mortar (weighted) gap and slip of slave boundary node j against the smooth
+// master curve (src/mortar_kinematics.cpp):
+//   g~_j = int phi_j g ds / int phi_j ds,   s~_j = int phi_j s ds / int phi_j ds,
+// phi_j the indicator of node j's dual cell (the halves of the two boundary
+// sub-segments around it), g and s those of curve_node at each slave
+// boundary point, integrated over the slave's boundary edges (straight or
+// quadratic) in the reference arc length.
+// q = (m0..m6, s0..s4), 24 unknowns: seven consecutive master boundary nodes
+// (the closest point of every slave point must lie on the four segments
+// m1 -> m5; else *beyond = -1 / +1: re-centre the patch) and the slave
+// boundary nodes j-2..j+2 (s2 = node j; the edges through them carry the
+// slave points). Exact first and (if `hessians`) second derivatives.
+struct MortarSupport {
+  int order = 2;          // slave mesh order: 1 straight edges, 2 quadratic edges
+  bool vertex = true;     // order 2: node j is a vertex (else a mid-edge node)
+  double length[2] = {1.0, 1.0};  // reference lengths of the sub-segments j-1 -> j and j -> j+1
+};
+PairKinematics mortar_node(const double q[24], const double q0[24], const MortarSupport &support, bool hessians = true,
+                           int *beyond = nullptr);
 
 }  // namespace deformix

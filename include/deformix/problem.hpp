@@ -117,6 +117,7 @@ struct ProblemParameters {
   double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   PetscBool contact_two_pass = PETSC_FALSE;  // deformable pairs: node-to-segment both ways (else the higher particle's nodes only)
+  PetscBool contact_mortar = PETSC_FALSE;    // deformable pairs: mortar weighted gap of each slave node (mortar_node)
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
   PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path
   double repartition_tol = 0.1;  // repartition when the new edge cut is smaller by this fraction or the imbalance exceeds 1 + this (< 0: never)
@@ -331,6 +332,7 @@ class CompactionProblem {
     bool frictional = false;
     bool curved = false;   // the gap / slip have second derivatives
     int slave_xy = 0;      // local index of the slave's x unknown (force on the slave)
+    int slave_nodes = 1;   // slave nodes from slave_xy on (mortar: 5; the force on the slave is their sum)
     int beyond = 0;        // node-segment: the closest point left the pair's window (window_node)
   };
   void ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc, bool hessians = false) const;
