@@ -3,8 +3,8 @@
 
 compact offers three laws for a pair of deformable disks (pair_kinematics.hpp):
   nts       one-pass node-to-segment (the slave's nodes against the master's curve),
-  two_pass  node-to-segment both ways (-contact_two_pass),
-  mortar    the slave node's gap averaged over its dual cell (-contact_mortar).
+  two_pass  node-to-segment both ways (-contact_deformable two_pass),
+  mortar    the slave node's gap averaged over its dual cell (-contact_deformable mortar).
 For each scene (N_p, kappa, friction) and law this runs build/bin/compact on the
 same packing and pressure levels, then measures the overlap of the deformable
 disks from levels.h5 alone (scripts/check_overlap.py: every boundary node of
@@ -36,7 +36,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from check_overlap import check_level  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-LAW_OPTIONS = {"nts": [], "two_pass": ["-contact_two_pass"], "mortar": ["-contact_mortar"]}
+LAW_OPTIONS = {law: ["-contact_deformable", law] for law in ("nts", "two_pass", "mortar")}
 
 
 def git_commit():

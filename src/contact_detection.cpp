@@ -194,10 +194,11 @@ std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double marg
           if (std::hypot(B.x - A.x, B.y - A.y) - A.r - B.r >= reach) continue;
           if (!A.rigid && !B.rigid) {
             // Deformable pair: B's nodes against A's curve, and with
-            // -contact_two_pass also A's nodes against B's curve. Each pass
+            // -contact_deformable two_pass also A's nodes against B's curve. Each pass
             // belongs to the rank of its slave.
             if (ParticleOwner(particle_of(B)) == rank_) node_segment_candidates(A, B);
-            if (params_.contact_two_pass && ParticleOwner(particle_of(A)) == rank_) node_segment_candidates(B, A);
+            const bool two_pass = params_.deformable_contact == DeformableContact::TwoPass;
+            if (two_pass && ParticleOwner(particle_of(A)) == rank_) node_segment_candidates(B, A);
             continue;
           }
           // The slave: the deformable disk of a rigid-deformable pair, else B.

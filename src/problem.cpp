@@ -38,6 +38,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscBool set = PETSC_FALSE;
   PetscInt ncp_choice = ncp == NcpFunction::Min ? 0 : 1;
   const char *const ncp_names[] = {"min", "fb", "NcpFunction", "ncp_", nullptr};
+  PetscInt deformable_choice = static_cast<PetscInt>(deformable_contact);
+  const char *const deformable_names[] = {"nts", "two_pass", "mortar"};  // DeformableContact order
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Material and contact solver", "deformix");
   PetscCall(PetscOptionsReal("-E", "Young's modulus of the deformable disks", "", young, &young, nullptr));
@@ -76,14 +78,11 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              newton_max_move, &newton_max_move, nullptr));
   PetscCall(PetscOptionsReal("-contact_margin", "contact candidates: gap below margin x mean diameter", "",
                              contact_margin, &contact_margin, nullptr));
-  PetscCall(PetscOptionsBool("-contact_two_pass",
-                             "deformable pairs: node-to-segment both ways (each disk's boundary nodes kept out of the other), "
-                             "instead of the higher-numbered disk's nodes only",
-                             "", contact_two_pass, &contact_two_pass, nullptr));
-  PetscCall(PetscOptionsBool("-contact_mortar",
-                             "deformable pairs: the slave node's gap integrated over the slave boundary around it "
-                             "(mortar weighted gap, so the master cannot enter between slave nodes) instead of the node's own gap",
-                             "", contact_mortar, &contact_mortar, nullptr));
+  PetscCall(PetscOptionsEList("-contact_deformable",
+                              "deformable pairs: nts (the higher-numbered disk's boundary nodes against the other's curve), "
+                              "two_pass (node-to-segment both ways), mortar (each slave node's gap averaged over its cell "
+                              "of the slave boundary, so the master cannot enter between slave nodes)",
+                              "", deformable_names, 3, deformable_names[deformable_choice], &deformable_choice, nullptr));
   PetscCall(PetscOptionsReal("-repartition_tol",
                              "MPI: repartition (METIS) when the edge cut can shrink by this fraction or the load imbalance "
                              "exceeds 1 + this (< 0: keep the first partition)",
@@ -92,6 +91,7 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              partition_view, &partition_view, nullptr));
   PetscOptionsEnd();
   ncp = ncp_choice == 0 ? NcpFunction::Min : NcpFunction::FischerBurmeister;
+  deformable_contact = static_cast<DeformableContact>(deformable_choice);
   PetscCheck(young > 0.0, comm, PETSC_ERR_USER_INPUT, "-E %g: Young's modulus must be positive", young);
   PetscCheck(poisson > -1.0 && poisson < 0.5, comm, PETSC_ERR_USER_INPUT,
              "-nu %g: Poisson's ratio must satisfy -1 < nu < 0.5 (nu = 0.5 is incompressible, use e.g. 0.4999)",
@@ -108,8 +108,6 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
              "-level_force_rtol %g must be in [0, 1)", level_force_rtol);
   PetscCheck(level_phi_rtol > 0.0, comm, PETSC_ERR_USER_INPUT, "-level_phi_rtol %g must be positive", level_phi_rtol);
   PetscCheck(newton_max_move >= 0.0, comm, PETSC_ERR_USER_INPUT, "-newton_max_move %g must be >= 0", newton_max_move);
-  PetscCheck(!(contact_mortar && contact_two_pass), comm, PETSC_ERR_USER_INPUT,
-             "-contact_mortar and -contact_two_pass exclude each other (two mortar passes over-constrain the contact): choose one");
   PetscCheck(contact_margin > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_margin %g must be positive", contact_margin);
   PetscFunctionReturn(0);
 }
@@ -484,7 +482,7 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       const int nb = static_cast<int>(m.boundary.size());
       // The master boundary around its node `segment`: five nodes, the smooth
       // master curve on the two segments around it.
-      if (params_.contact_mortar) {
+      if (params_.deformable_contact == DeformableContact::Mortar) {
         // Mortar: seven master nodes around `segment`, the slave nodes point-2 .. point+2.
         const DiskMesh &s = bodies_[c.body].mesh;
         const int ns = static_cast<int>(s.boundary.size());

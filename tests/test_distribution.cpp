@@ -40,8 +40,9 @@ std::unique_ptr<CompactionProblem> Build(MPI_Comm comm, Pass pass = Pass::One) {
   DiskPacking packing = make_jammed_packing(30, 3, PackingOptions());
   assign_deformable(packing, 0.5, 3);
   ProblemParameters p;
-  p.contact_two_pass = pass == Pass::Two ? PETSC_TRUE : PETSC_FALSE;
-  p.contact_mortar = pass == Pass::Mortar ? PETSC_TRUE : PETSC_FALSE;
+  p.deformable_contact = pass == Pass::Two      ? DeformableContact::TwoPass
+                         : pass == Pass::Mortar ? DeformableContact::Mortar
+                                                : DeformableContact::NodeToSegment;
   p.friction = 0.3;
   p.constrain_rotation = PETSC_FALSE;
   p.ptc_move = 0.02;
@@ -213,7 +214,7 @@ TEST(Distribution, MortarResidualAndJacobianEqualTheSerialAssembly) { CheckAssem
 // Contact detection on several ranks: each rank's narrow phase finds exactly
 // the candidates whose slave particle it owns, no rank finds one twice, and
 // the gathered list equals the serial detection on the same state.
-// With -contact_two_pass each pass of a deformable pair belongs to the rank
+// With -contact_deformable two_pass each pass of a deformable pair belongs to the rank
 // of its own slave, so the two passes of a pair cut by the partition are
 // detected on different ranks.
 void CheckDetection(bool two_pass) {

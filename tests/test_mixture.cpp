@@ -41,7 +41,7 @@ std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern defor
                                            int triangles = 92) {
   ProblemParameters p;
   p.friction = friction;
-  p.contact_mortar = mortar ? PETSC_TRUE : PETSC_FALSE;
+  p.deformable_contact = mortar ? DeformableContact::Mortar : DeformableContact::NodeToSegment;
   p.constrain_rotation = PETSC_FALSE;
   p.ptc_move = 0.02;  // as the compact driver: pseudo-transient continuation
   auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
@@ -207,7 +207,7 @@ TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
   CheckJacobian(Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; }), "frictional checkerboard");
 }
 
-// Four deformable disks in contact through the mortar gap (-contact_mortar).
+// Four deformable disks in contact through the mortar gap (-contact_deformable mortar).
 TEST(Mixture, MortarFrictionalJacobianMatchesFiniteDifferences) {
   CheckJacobian(Lattice(2, 0.4, [](int, int) { return true; }, true, 40), "frictional mortar lattice");
 }
@@ -325,7 +325,7 @@ std::unique_ptr<CompactionProblem> TwoPassPacking(double friction) {
   ProblemParameters p;
   p.friction = friction;
   p.constrain_rotation = PETSC_TRUE;
-  p.contact_two_pass = PETSC_TRUE;
+  p.deformable_contact = DeformableContact::TwoPass;
   p.ptc_move = 0.02;
   p.newton_max_move = 0.05;
   p.level_force_rtol = 1e-4;
@@ -335,7 +335,7 @@ std::unique_ptr<CompactionProblem> TwoPassPacking(double friction) {
   return problem;
 }
 
-// -contact_two_pass: in a frictionless all-deformable packing at P/E = 0.05 each
+// -contact_deformable two_pass: in a frictionless all-deformable packing at P/E = 0.05 each
 // disk's boundary nodes are kept out of its neighbours both ways (one pass
 // leaves the master's nodes free to enter the slave; docs/validation.md).
 TEST(Mixture, TwoPassKeepsTheNodesOfBothDisksOut) {
@@ -437,7 +437,7 @@ double DeepestBoundaryOverlap(const CompactionProblem &problem) {
   return deepest;
 }
 
-// -contact_mortar: the weighted gap integrates each slave node's gap over
+// -contact_deformable mortar: the weighted gap integrates each slave node's gap over
 // the slave boundary around it, so a master corner cannot enter the slave
 // between its nodes. The same frictionless 12-disk packing taken to
 // P/E = 0.1 with one-pass node-to-segment contact and with the mortar gap:
@@ -452,7 +452,7 @@ TEST(Mixture, MortarGapKeepsTheBoundariesApart) {
     assign_deformable(packing, 1.0, 1);
     ProblemParameters p;
     p.constrain_rotation = PETSC_TRUE;
-    p.contact_mortar = mortar ? PETSC_TRUE : PETSC_FALSE;
+    p.deformable_contact = mortar ? DeformableContact::Mortar : DeformableContact::NodeToSegment;
     p.ptc_move = 0.02;
     p.newton_max_move = 0.05;
     p.level_force_rtol = 1e-4;

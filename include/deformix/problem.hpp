@@ -22,9 +22,12 @@
 // Contact pairs (pair_kinematics.hpp, wall_box.hpp): a boundary point of a
 // deformable disk against a wall, a rigid disk against a wall, rigid-rigid,
 // rigid disk against a boundary node of a deformable disk, and a boundary
-// node of one deformable disk against the boundary of another (curve_node:
-// the smooth curve through five master boundary nodes, so the contact may
-// slide over a segment inside one solve with a C1 gap). Walls are frictionless.
+// node of one deformable disk against the boundary of another: by default
+// the node's own gap (curve_node; -contact_deformable nts or two_pass), or
+// the node's gap averaged over its cell of the slave boundary (mortar_node,
+// -contact_deformable mortar), both against the smooth curve through the
+// master's boundary nodes, so the contact may slide over a segment inside
+// one solve with a C1 gap. Walls are frictionless.
 //
 // Singular modes. Rattlers, the free rotation of frictionless disks and the
 // translation of the whole assembly (walls + bodies) make the tangent
@@ -101,6 +104,14 @@
 
 namespace deformix {
 
+// Contact law of a pair of deformable disks (-contact_deformable):
+//   NodeToSegment  the boundary nodes of the higher-numbered disk (the slave)
+//                  against the other's contact curve (curve_node);
+//   TwoPass        the same both ways, each disk's nodes against the other's curve;
+//   Mortar         each slave node's gap averaged over its cell of the slave
+//                  boundary (mortar_node).
+enum class DeformableContact : int { NodeToSegment = 0, TwoPass = 1, Mortar = 2 };
+
 struct ProblemParameters {
   double young = 1.0;            // E
   double poisson = 0.495;        // nu
@@ -116,8 +127,7 @@ struct ProblemParameters {
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
-  PetscBool contact_two_pass = PETSC_FALSE;  // deformable pairs: node-to-segment both ways (else the higher particle's nodes only)
-  PetscBool contact_mortar = PETSC_FALSE;    // deformable pairs: mortar weighted gap of each slave node (mortar_node)
+  DeformableContact deformable_contact = DeformableContact::NodeToSegment;  // law of deformable-deformable pairs
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
   PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path
   double repartition_tol = 0.1;  // repartition when the new edge cut is smaller by this fraction or the imbalance exceeds 1 + this (< 0: never)
