@@ -14,11 +14,14 @@ static const char help[] =
     "A level is accepted at exact equilibrium or by the paper's criterion: unbalanced forces\n"
     "<= -level_force_rtol x P <d>, phi settled to -level_phi_rtol, contact conditions exact.\n\n"
     "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (the state of every\n"
-    "level) and <output_dir>/packing.csv (the initial packing).\n\n"
+    "level), <output_dir>/packing.csv (the initial packing) and <output_dir>/checkpoint.h5 (after\n"
+    "every level: what -restart needs to continue the run exactly where it stopped).\n\n"
     "Examples:\n"
     "  build/bin/compact -options_file petsc-options/default.opts     (20 disks, about a minute)\n"
     "  build/bin/compact -n_particles 64 -kappa 0.5 -friction 0.2 -pressures 1e-4,1e-3 -output_dir out/c64\n"
-    "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8   (1500 disks: not yet practical)\n\n"
+    "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8   (1500 disks: not yet practical)\n"
+    "  build/bin/compact -options_file petsc-options/default.opts -pressures 1e-4,1e-3,3e-3,0.01,0.02,0.03,0.05 \\\n"
+    "      -restart out/compact/checkpoint.h5      (continue the default scene by one more level)\n\n"
     "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
     "each Newton iteration with the numbers of closed and sliding contacts, -newton_monitor_contacts\n"
     "the contacts whose state changed (to see an active-set cycle), -ptc_monitor each\n"
@@ -28,10 +31,12 @@ static const char help[] =
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <exception>
 #include <string>
 #include <vector>
 
+#include "deformix/checkpoint.hpp"
 #include "deformix/disk_mesh.hpp"
 #include "deformix/load_controller.hpp"
 #include "deformix/observables.hpp"
@@ -54,9 +59,13 @@ struct CompactOptions {
   PetscBool write_hdf5 = PETSC_TRUE;
   PetscBool settle_frictionless = PETSC_TRUE;
   PetscBool settle_rigid = PETSC_TRUE;
+  PetscBool checkpoint = PETSC_TRUE;
+  std::string restart;  // checkpoint to continue from ("" : a new run)
 };
 
 PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
+  char restart[PETSC_MAX_PATH_LEN] = "";
+  PetscBool restart_set = PETSC_FALSE;
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Mixture compaction", "deformix");
   PetscCall(PetscOptionsInt("-n_particles", "number of disks N_p", "", o->n_particles, &o->n_particles, nullptr));
@@ -75,7 +84,16 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
   PetscCall(PetscOptionsBool("-settle_frictionless",
                              "settle the packing without friction at min(first level, 1e-4 E), then switch friction on, solve again and step to the first level", "",
                              o->settle_frictionless, &o->settle_frictionless, nullptr));
+  PetscCall(PetscOptionsBool("-checkpoint", "write <output_dir>/checkpoint.h5 after every level (for -restart)", "",
+                             o->checkpoint, &o->checkpoint, nullptr));
+  PetscCall(PetscOptionsString("-restart",
+                               "continue the run saved in this checkpoint.h5: the scene options must be the same and its "
+                               "levels the first ones of -pressures",
+                               "", restart, restart, sizeof(restart), &restart_set));
   PetscOptionsEnd();
+  PetscCheck(!restart_set || restart[0], comm, PETSC_ERR_USER_INPUT,
+             "-restart needs the path of a checkpoint.h5, e.g. -restart out/compact/checkpoint.h5");
+  o->restart = restart;
   PetscCheck(o->n_particles >= 1 && o->n_particles <= 200000, comm, PETSC_ERR_USER_INPUT,
              "-n_particles %" PetscInt_FMT ": give between 1 and 200000 particles", o->n_particles);
   PetscCheck(o->kappa >= 0.0 && o->kappa <= 1.0, comm, PETSC_ERR_USER_INPUT,
@@ -95,6 +113,42 @@ PetscErrorCode WritePackingCsv(MPI_Comm comm, const std::string &path, const Dis
   PetscFunctionBeginUser;
   PetscCall(csv.Open(comm, path, {"x", "y", "radius", "deformable"}));
   for (int i = 0; i < p.size(); ++i) PetscCall(csv.Row({p.x[i], p.y[i], p.radius[i], double(p.deformable[i])}));
+  PetscFunctionReturn(0);
+}
+
+const std::vector<std::string> kCurveColumns = {
+    "P_over_E", "phi", "Z", "Z_no_rattlers", "rattlers", "sigma_xx_over_E", "sigma_xy_over_E", "sigma_yy_over_E",
+    "P_sigma_over_E", "K_over_E", "mean_volumetric_strain", "contacts", "sliding_contacts", "newton_its", "substeps",
+    "cuts", "seconds", "max_penetration", "pseudo_time_steps", "symbolic_factorizations", "unknowns",
+    "rigid_unknowns", "deformable_unknowns", "tangential_unknowns", "candidates", "jacobian_nonzeros",
+    "force_residual_over_Pd", "relaxed_substeps", "gauge_torque_over_Pd2"};
+
+// Reads the checkpoint of -restart and checks that this run can continue it:
+// the same scene, the same curve columns, and its levels the first ones of
+// -pressures with at least one left to do. Nothing is written before.
+PetscErrorCode LoadRestart(MPI_Comm comm, const CompactOptions &opts, const CompactionScene &scene, Checkpoint *c) {
+  PetscFunctionBeginUser;
+  PetscCall(ReadCheckpoint(comm, opts.restart, c));
+  const std::string diff = SceneDifference(c->scene, scene);
+  PetscCheck(diff.empty(), comm, PETSC_ERR_USER_INPUT,
+             "-restart %s was written for another scene (%s): give the scene options of the run it continues",
+             opts.restart.c_str(), diff.c_str());
+  PetscCheck(c->packing.size() == opts.n_particles, comm, PETSC_ERR_FILE_UNEXPECTED,
+             "-restart %s holds %d disks for -n_particles %" PetscInt_FMT, opts.restart.c_str(), c->packing.size(),
+             opts.n_particles);
+  PetscCheck(c->columns == kCurveColumns, comm, PETSC_ERR_FILE_UNEXPECTED,
+             "-restart %s was written by another version of compact (its curve.csv columns differ)", opts.restart.c_str());
+  const size_t done = c->levels.size();
+  for (size_t i = 0; i < done; ++i) {
+    char given[32] = "nothing";
+    if (i < opts.pressures.size()) std::snprintf(given, sizeof(given), "%g", opts.pressures[i]);
+    PetscCheck(i < opts.pressures.size() && opts.pressures[i] == c->levels[i], comm, PETSC_ERR_USER_INPUT,
+               "-restart %s: its level %zu is P/E = %g, but -pressures has %s there; -pressures must begin with "
+               "the %zu levels of the checkpoint", opts.restart.c_str(), i, c->levels[i], given, done);
+  }
+  PetscCheck(opts.pressures.size() > done, comm, PETSC_ERR_USER_INPUT,
+             "-restart %s: the checkpoint already holds all %zu levels of -pressures; add levels to continue",
+             opts.restart.c_str(), done);
   PetscFunctionReturn(0);
 }
 
@@ -150,30 +204,49 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(load.SetFromOptions(comm));
   if (HelpRequested()) PetscFunctionReturn(0);
   PetscCall(CheckUnknownOptions(comm));
+  CompactionScene scene;
+  scene.n_particles = opts.n_particles, scene.kappa = opts.kappa, scene.seed = opts.seed;
+  scene.mesh_triangles = opts.mesh_triangles;
+  scene.young = params.young, scene.poisson = params.poisson, scene.friction = params.friction;
+  scene.deformable_contact = static_cast<int>(params.deformable_contact);
+  scene.constrain_rotation = params.constrain_rotation ? 1 : 0;
+  const bool restarting = !opts.restart.empty();
+  Checkpoint restart;
+  if (restarting) PetscCall(LoadRestart(comm, opts, scene, &restart));
   PetscCall(PrepareOutputDirectory(comm, opts.output_dir));
   PetscCall(PetscLogStageRegister("Packing", &stage_pack));
   PetscCall(PetscLogStageRegister("Solve", &stage_solve));
   PetscCall(PetscLogStageRegister("Output", &stage_output));
 
-  // 2. Scene: jammed frictionless rigid packing, then a fraction kappa made deformable.
+  // 2. Scene: jammed frictionless rigid packing, then a fraction kappa made
+  // deformable; a restart takes the packing of its checkpoint instead.
   PetscCall(PetscLogStagePush(stage_pack));
-  DiskPacking packing;
+  DiskPacking packing = restart.packing;
   DiskMesh unit_mesh;
   try {
-    packing = make_jammed_packing(static_cast<int>(opts.n_particles), static_cast<unsigned>(opts.seed), PackingOptions());
-    assign_deformable(packing, opts.kappa, static_cast<unsigned>(opts.seed));
+    if (!restarting) {
+      packing = make_jammed_packing(static_cast<int>(opts.n_particles), static_cast<unsigned>(opts.seed), PackingOptions());
+      assign_deformable(packing, opts.kappa, static_cast<unsigned>(opts.seed));
+    }
     unit_mesh = make_disk_mesh(1.0, static_cast<int>(opts.mesh_triangles), 2);
   } catch (const std::exception &e) {
     SETERRQ(comm, PETSC_ERR_USER_INPUT, "scene set-up: %s", e.what());
   }
   PetscCall(PetscLogStagePop());
-  const Coordination z0 = coordination(packing, contact_network(packing, 0.0), 3);
-  const double phi0 = packing_fraction(packing);
+  double phi0 = restart.phi_0, z0_no_rattlers = restart.z0_no_rattlers, z0_mirror = restart.z0_mirror;
+  double rattlers0 = restart.rattler_fraction;
+  if (!restarting) {
+    const Coordination z0 = coordination(packing, contact_network(packing, 0.0), 3);
+    phi0 = packing_fraction(packing);
+    z0_no_rattlers = z0.non_rattlers ? 2.0 * z0.pair_contacts / z0.non_rattlers : 0.0;
+    z0_mirror = z0.z_mirror;
+    rattlers0 = z0.rattler_fraction;
+  }
   // The soft-jammed packing has tiny overlaps and gaps; settling it with
   // deformable disks is a slow, nonsmooth rearrangement, while the all-rigid
   // frictionless packing settles in a few Newton iterations (forces only).
   // Its equilibrium at the first pressure (at most 1e-4 E) is the starting geometry.
-  if (opts.settle_rigid && opts.kappa > 0.0) {
+  if (!restarting && opts.settle_rigid && opts.kappa > 0.0) {
     ProblemParameters rigid_params = params;
     rigid_params.friction = 0.0;
     // Rigid frictionless contacts: c_n = E decides the active set by the gaps,
@@ -203,6 +276,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   CompactionProblem problem(comm);
   PetscCall(problem.SetParameters(params));
   const int n_deformable = problem.AddPacking(packing, unit_mesh);
+  if (restarting) PetscCall(problem.RestoreSnapshot(restart.state));
   PetscCall(WritePackingCsv(comm, opts.output_dir + "/packing.csv", packing));
   PetscCall(PetscPrintf(comm,
                         "compact: %d particles (%d deformable, %d triangles each; %d rigid), kappa = %g, friction = %g,"
@@ -211,25 +285,27 @@ PetscErrorCode Run(MPI_Comm comm) {
                         " (%.3f with wall contacts counted twice), rattlers %.1f %%\n",
                         packing.size(), n_deformable, unit_mesh.num_cells(), packing.size() - n_deformable,
                         (double)opts.kappa, params.friction, params.young, params.poisson, (int)opts.seed,
-                        phi0, z0.non_rattlers ? 2.0 * z0.pair_contacts / z0.non_rattlers : 0.0, z0.z_mirror,
-                        100.0 * z0.rattler_fraction));
+                        phi0, z0_no_rattlers, z0_mirror, 100.0 * rattlers0));
+  if (restarting)
+    PetscCall(PetscPrintf(comm, "  restart from %s: %zu level(s) done (last P/E = %g), continuing with P/E = %g\n",
+                          opts.restart.c_str(), restart.levels.size(), restart.levels.back(),
+                          opts.pressures[restart.levels.size()]));
 
   // 3. Levels: solve, measure, write.
   CsvWriter curve;
-  PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv",
-                       {"P_over_E", "phi", "Z", "Z_no_rattlers", "rattlers", "sigma_xx_over_E", "sigma_xy_over_E",
-                        "sigma_yy_over_E", "P_sigma_over_E", "K_over_E", "mean_volumetric_strain", "contacts",
-                        "sliding_contacts", "newton_its", "substeps", "cuts", "seconds", "max_penetration", "pseudo_time_steps",
-                        "symbolic_factorizations", "unknowns", "rigid_unknowns", "deformable_unknowns",
-                        "tangential_unknowns", "candidates", "jacobian_nonzeros", "force_residual_over_Pd",
-                        "relaxed_substeps", "gauge_torque_over_Pd2"}));
+  PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv", kCurveColumns));
+  std::vector<std::vector<double>> rows = restart.rows;  // the curve so far (checkpoints repeat it)
+  for (const std::vector<double> &row : rows) PetscCall(curve.Row(row));
   const std::string h5 = opts.output_dir + "/levels.h5";
-  // Results of an earlier run in this directory must not mix with this one.
-  PetscCall(RemoveFile(comm, h5));
+  // Results of an earlier run in this directory must not mix with this one;
+  // a restarted run keeps the levels before its checkpoint.
+  if (restarting) PetscCall(TruncateLevelsHDF5(comm, h5, static_cast<int>(rows.size())));
+  else PetscCall(RemoveFile(comm, h5));
   PetscCall(PetscPrintf(comm, "  %9s %8s %6s %6s %10s %8s %7s %6s %6s %8s\n", "P/E", "phi", "Z", "Z_nr", "P_sig/P",
                         "K/E", "slide", "newton", "steps", "seconds"));
-  double step = -1.0, prev_phi = phi0, prev_P = 0.0;
-  for (size_t level = 0; level < opts.pressures.size(); ++level) {
+  double step = restarting ? restart.load_step : -1.0;
+  double prev_phi = restarting ? restart.previous_phi : phi0, prev_P = restarting ? restart.previous_P : 0.0;
+  for (size_t level = rows.size(); level < opts.pressures.size(); ++level) {
     const double P_over_E = opts.pressures[level], P = P_over_E * params.young;
     LevelReport rep;
     PetscCall(PetscLogStagePush(stage_solve));
@@ -286,7 +362,7 @@ PetscErrorCode Run(MPI_Comm comm) {
                           rep.substeps, rep.seconds));
     PetscCall(PetscLogStagePush(stage_output));
     const double E = params.young;
-    PetscCall(curve.Row({P_over_E, o.packing_fraction, o.coordination, o.coordination_no_rattlers, double(o.rattlers),
+    rows.push_back({P_over_E, o.packing_fraction, o.coordination, o.coordination_no_rattlers, double(o.rattlers),
                          o.stress[0] / E, o.stress[1] / E, o.stress[3] / E, o.mean_stress / E, K / E,
                          o.mean_volumetric_strain, double(o.contacts), double(o.sliding_contacts),
                          double(rep.newton_its), double(rep.substeps), double(rep.cuts), rep.seconds,
@@ -294,12 +370,26 @@ PetscErrorCode Run(MPI_Comm comm) {
                          double(sizes.rigid), double(sizes.deformable), double(sizes.tangential),
                          double(sizes.normal), double(sizes.jacobian_nonzeros),
                          rep.force_residual / (P * problem.MeanDiameter()), double(rep.relaxed_substeps),
-                         problem.Summary().max_gauge_torque / (P * problem.MeanDiameter() * problem.MeanDiameter())}));
+                         problem.Summary().max_gauge_torque / (P * problem.MeanDiameter() * problem.MeanDiameter())});
+    PetscCall(curve.Row(rows.back()));
     if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
+    if (opts.checkpoint) {
+      Checkpoint c;
+      c.scene = scene;
+      c.packing = packing;
+      c.phi_0 = phi0, c.z0_no_rattlers = z0_no_rattlers, c.z0_mirror = z0_mirror, c.rattler_fraction = rattlers0;
+      c.levels.assign(opts.pressures.begin(), opts.pressures.begin() + level + 1);
+      c.columns = kCurveColumns;
+      c.rows = rows;
+      c.load_step = step;
+      c.previous_phi = prev_phi, c.previous_P = prev_P;
+      c.state = problem.TakeSnapshot();
+      PetscCall(WriteCheckpoint(comm, opts.output_dir + "/checkpoint.h5", c));
+    }
     PetscCall(PetscLogStagePop());
   }
-  PetscCall(PetscPrintf(comm, "  wrote %s/curve.csv%s\n", opts.output_dir.c_str(),
-                        opts.write_hdf5 ? " and levels.h5" : ""));
+  PetscCall(PetscPrintf(comm, "  wrote %s/curve.csv%s%s\n", opts.output_dir.c_str(),
+                        opts.write_hdf5 ? ", levels.h5" : "", opts.checkpoint ? ", checkpoint.h5" : ""));
   PetscFunctionReturn(0);
 }
 

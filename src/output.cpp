@@ -3,6 +3,7 @@
 #include <hdf5.h>
 
 #include <cstring>
+#include <unistd.h>
 
 namespace deformix {
 
@@ -97,6 +98,10 @@ PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level,
   // Attribute values must be identical on all ranks: take rank 0's.
   double attr[2] = {P_over_E, problem.Summary().packing_fraction};
   PetscCallMPI(MPI_Bcast(attr, 2, MPI_DOUBLE, 0, comm));
+  // A restarted run appends to the file of the run it continues, if it is there.
+  int exists = 0;
+  if (rank == 0) exists = access(path.c_str(), F_OK) == 0;
+  PetscCallMPI(MPI_Bcast(&exists, 1, MPI_INT, 0, comm));
   hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
 #ifdef H5_HAVE_PARALLEL
   H5Pset_fapl_mpio(fapl, comm, MPI_INFO_NULL);
@@ -107,8 +112,8 @@ PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level,
   const std::vector<int> owner;  // rank 0 writes everything
 #endif
   if (opens) {
-    hid_t file = level == 0 ? H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl)
-                            : H5Fopen(path.c_str(), H5F_ACC_RDWR, fapl);
+    hid_t file = (level == 0 || !exists) ? H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl)
+                                         : H5Fopen(path.c_str(), H5F_ACC_RDWR, fapl);
     ok = file >= 0;
     if (ok) {
       char name[64];
@@ -156,6 +161,33 @@ PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level,
   H5Pclose(fapl);
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &ok, 1, MPI_INT, MPI_MIN, comm));
   PetscCheck(ok, comm, PETSC_ERR_FILE_WRITE, "writing level %d to %s failed", level, path.c_str());
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode TruncateLevelsHDF5(MPI_Comm comm, const std::string &path, int first) {
+  PetscMPIInt rank;
+  int ok = 1;
+  PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  if (rank == 0 && access(path.c_str(), F_OK) == 0) {
+    H5E_auto2_t func;
+    void *data;
+    H5Eget_auto2(H5E_DEFAULT, &func, &data);
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    ok = file >= 0;
+    for (int level = first; ok; ++level) {
+      char name[64];
+      std::snprintf(name, sizeof(name), "level_%04d", level);
+      if (H5Lexists(file, name, H5P_DEFAULT) <= 0) break;
+      ok = H5Ldelete(file, name, H5P_DEFAULT) >= 0;
+    }
+    if (file >= 0 && H5Fclose(file) < 0) ok = 0;
+    H5Eset_auto2(H5E_DEFAULT, func, data);
+  }
+  PetscCallMPI(MPI_Bcast(&ok, 1, MPI_INT, 0, comm));
+  PetscCheck(ok, comm, PETSC_ERR_FILE_WRITE, "%s: cannot remove the levels from %d on (restart); move the file away",
+             path.c_str(), first);
   PetscFunctionReturn(0);
 }
 

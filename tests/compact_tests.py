@@ -12,6 +12,14 @@ Cases
                     stepping from the settled packing inside the level), against
                     the same scene taken there in 5 levels: the friction path
                     differs only by the sub-steps, so phi must agree to 5e-3
+  restart           12 disks, kappa = 0.5, friction 0.3: a run stopped after two
+                    levels and restarted from its checkpoint.h5 for the third
+                    repeats the three-level run bit for bit (curve.csv but its
+                    seconds, levels.h5); restarted on 2 ranks it agrees to solver
+                    tolerance; a restart from an earlier checkpoint rewrites the
+                    later levels of levels.h5; bad checkpoints and options that do
+                    not fit the checkpoint are refused with a clear message and
+                    leave the existing results byte-identical
 
 Every row of curve.csv must satisfy: all requested levels present, phi rising
 with P, no penetration beyond 1e-9 <d>, the unbalanced force within the level
@@ -21,6 +29,7 @@ Z > 0 and rising with compaction, no negative bulk modulus.
 """
 import argparse
 import csv
+import filecmp
 import os
 import shutil
 import subprocess
@@ -60,12 +69,135 @@ def run_compact(driver, out, pressures, timeout, scene=SCENE, launcher=(), extra
     return rows
 
 
+RESTART_SCENE = ["-n_particles", "12", "-kappa", "0.5", "-friction", "0.3", "-seed", "2", "-mesh_triangles", "40"]
+
+
+def compact(driver, out, pressures, launcher=(), extra=()):
+    """Runs compact into `out` (kept as it is); returns (exit code, output)."""
+    cmd = list(launcher) + [driver] + RESTART_SCENE + ["-pressures", ",".join(str(p) for p in pressures),
+                                                       "-output_dir", out] + list(extra)
+    print("$ " + " ".join(cmd))
+    p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=300)
+    print(p.stdout)
+    return p.returncode, p.stdout
+
+
+def read_curve(out):
+    with open(os.path.join(out, "curve.csv"), newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def h5_levels(path):
+    """{level name: {dataset path: array}} and the P_over_E attribute of each level."""
+    import h5py
+    import numpy as np
+    levels = {}
+    with h5py.File(path, "r") as f:
+        for name, g in f.items():
+            data = {"P_over_E": float(g.attrs["P_over_E"])}
+            g.visititems(lambda k, v: data.__setitem__(k, np.array(v)) if isinstance(v, h5py.Dataset) else None)
+            levels[name] = data
+    return levels
+
+
+def restart_case(driver, workdir, mpiexec):
+    import numpy as np
+    levels = [1e-4, 1e-3, 3e-3]
+    full, part = os.path.join(workdir, "full"), os.path.join(workdir, "part")
+    for d in (full, part):
+        shutil.rmtree(d, ignore_errors=True)
+    rc, _ = compact(driver, full, levels)
+    check(rc == 0, f"three-level run: exit code {rc}")
+    rc, _ = compact(driver, part, levels[:2])
+    check(rc == 0 and os.path.exists(os.path.join(part, "checkpoint.h5")), "two-level run writes checkpoint.h5")
+    two_levels = os.path.join(workdir, "two-levels.h5")
+    shutil.copy(os.path.join(part, "checkpoint.h5"), two_levels)
+    rc, text = compact(driver, part, levels, extra=["-restart", os.path.join(part, "checkpoint.h5")])
+    check(rc == 0 and "restart from" in text, f"restart for the third level: exit code {rc}")
+    a, b = read_curve(full), read_curve(part)
+    check(len(a) == len(b) == 3, f"restarted curve has {len(b)} rows (3)")
+    for ra, rb in zip(a, b):
+        ra = {k: v for k, v in ra.items() if k != "seconds"}
+        rb = {k: v for k, v in rb.items() if k != "seconds"}
+        diff = [k for k in ra if ra[k] != rb.get(k)]
+        check(not diff, f"P/E = {ra['P_over_E']}: restarted row equals the uninterrupted one to all digits (differs in {diff})")
+    ha, hb = h5_levels(os.path.join(full, "levels.h5")), h5_levels(os.path.join(part, "levels.h5"))
+    check(sorted(ha) == sorted(hb), f"levels.h5 groups {sorted(hb)} == {sorted(ha)}")
+    same = all(k in hb[g] and np.array_equal(ha[g][k], hb[g][k]) for g in ha if g in hb for k in ha[g])
+    check(same, "levels.h5 of the restarted run equals the uninterrupted one's, every dataset bit for bit")
+
+    # On two ranks (METIS partition, distributed MUMPS): the same curve to solver tolerance.
+    two = os.path.join(workdir, "two-ranks")
+    shutil.rmtree(two, ignore_errors=True)
+    rc, _ = compact(driver, two, levels, [mpiexec, "-n", "2", "--oversubscribe"], ["-restart", two_levels])
+    check(rc == 0, f"restart on 2 ranks: exit code {rc}")
+    if rc == 0:
+        r1, r2 = a[-1], read_curve(two)[-1]
+        check(abs(float(r2["phi"]) - float(r1["phi"])) <= 1e-4 * float(r1["phi"]),
+              f"2 ranks: phi {r2['phi']} vs serial {r1['phi']} (within 1e-4 relative)")
+        check(read_curve(two)[:2] == read_curve(part)[:2], "2 ranks: the checkpoint's rows are written back unchanged")
+
+    # From an earlier checkpoint (one level) into the three-level directory, with a
+    # different second level: levels.h5 loses the old levels 1 and 2.
+    one = os.path.join(workdir, "one-level")
+    shutil.rmtree(one, ignore_errors=True)
+    compact(driver, one, levels[:1])
+    early = os.path.join(workdir, "one-level.h5")
+    shutil.copy(os.path.join(one, "checkpoint.h5"), early)
+    redo = os.path.join(workdir, "redo")
+    shutil.rmtree(redo, ignore_errors=True)
+    shutil.copytree(full, redo)
+    rc, _ = compact(driver, redo, [1e-4, 2e-3], extra=["-restart", early])
+    check(rc == 0, f"restart from the first level into a three-level directory: exit code {rc}")
+    if rc == 0:
+        h = h5_levels(os.path.join(redo, "levels.h5"))
+        check(sorted(h) == ["level_0000", "level_0001"] and h["level_0001"]["P_over_E"] == 2e-3,
+              f"levels.h5 holds the two levels of the restarted run ({ {k: v['P_over_E'] for k, v in h.items()} })")
+        check([r["P_over_E"] for r in read_curve(redo)] == ["0.0001", "0.002"], "curve.csv holds its two levels")
+
+    # Bad restarts: refused with a message naming the problem, results untouched.
+    broken = os.path.join(workdir, "broken.h5")
+    with open(two_levels, "rb") as f:
+        head = f.read(4096)
+    with open(broken, "wb") as f:
+        f.write(head)  # a checkpoint cut short (a full disk, a killed copy)
+    incomplete = os.path.join(workdir, "incomplete.h5")
+    shutil.copy(two_levels, incomplete)
+    import h5py
+    with h5py.File(incomplete, "r+") as f:
+        del f["current/lambda_n"]
+    cases = [
+        (["-restart", os.path.join(workdir, "missing.h5")], levels, "cannot open it"),
+        (["-restart", os.path.join(full, "curve.csv")], levels, "it is not an HDF5 file"),
+        (["-restart", os.path.join(full, "levels.h5")], levels, "it is not a deformix checkpoint"),
+        (["-restart", broken], levels, "-restart " + broken),
+        (["-restart", incomplete], levels, "dataset lambda_n is missing"),
+        (["-restart", two_levels, "-kappa", "0.6"], levels, "was written for another scene (-kappa: checkpoint 0.5, this run 0.6)"),
+        (["-restart", two_levels, "-n_particles", "13"], levels, "(-n_particles: checkpoint 12, this run 13)"),
+        (["-restart", two_levels], [1e-4, 2e-3, 3e-3], "its level 1 is P/E = 0.001, but -pressures has 0.002 there"),
+        (["-restart", two_levels], levels[:2], "already holds all 2 levels of -pressures"),
+        (["-restart", two_levels, "-checkpoint", "maybe"], levels, "maybe"),
+    ]
+    for extra, pressures, expect in cases:
+        before = sorted(os.listdir(part))
+        snapshot = os.path.join(workdir, "snapshot")
+        shutil.rmtree(snapshot, ignore_errors=True)
+        shutil.copytree(part, snapshot)
+        # The scene options come first; a later repeat of an option wins.
+        rc, text = compact(driver, part, pressures, extra=extra)
+        check(rc != 0, f"{' '.join(extra[2:]) or extra[1]}: refused (exit code {rc})")
+        check(expect in text, f"message contains '{expect}'")
+        match, mismatch, errors = filecmp.cmpfiles(snapshot, part, before, shallow=False)
+        check(sorted(os.listdir(part)) == before and not mismatch and not errors,
+              f"existing results byte-identical (changed: {mismatch + errors})")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--driver", required=True)
     ap.add_argument("--workdir", required=True)
     ap.add_argument("--mpiexec", default="mpirun")
-    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi"])
+    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart"])
     a = ap.parse_args()
     os.makedirs(a.workdir, exist_ok=True)
     if a.case == "friction-to-half":
@@ -91,6 +223,8 @@ def main():
                 nonrattlers = 30 - r1["rattlers"]
                 check(abs(rn["Z_no_rattlers"] - r1["Z_no_rattlers"]) <= 2.0 / nonrattlers + 1e-12,
                       f"{tag}: Z_nr {rn['Z_no_rattlers']:.4f} vs serial {r1['Z_no_rattlers']:.4f} (within one contact)")
+    elif a.case == "restart":
+        restart_case(a.driver, a.workdir, a.mpiexec)
     else:
         rows = run_compact(a.driver, os.path.join(a.workdir, "jump"), [0.1], timeout=900)
         ref = run_compact(a.driver, os.path.join(a.workdir, "stepped"), [1e-4, 1e-3, 0.01, 0.05, 0.1], timeout=900)

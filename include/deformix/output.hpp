@@ -41,9 +41,12 @@ class CsvWriter {
 // Removes a file if it exists (rank 0).
 PetscErrorCode RemoveFile(MPI_Comm comm, const std::string &path);
 
-// Appends level `level` to the HDF5 file `path` (created at level 0).
-// Collective on comm.
+// Appends level `level` to the HDF5 file `path` (created at level 0, or
+// when it does not exist). Collective on comm.
 PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level, double P_over_E,
                               const CompactionProblem &problem);
+// Removes the groups of levels `first`, first + 1, ... from `path`, if it
+// exists: a run restarted from an earlier checkpoint rewrites them.
+PetscErrorCode TruncateLevelsHDF5(MPI_Comm comm, const std::string &path, int first);
 
 }  // namespace deformix

@@ -264,7 +264,7 @@ class CompactionProblem {
   // Copy / restore of the state (for step cut-backs).
   struct State {
     std::vector<double> u;
-    double w[4];
+    double w[4] = {0, 0, 0, 0};
     std::vector<double> lambda;    // normal multipliers, aligned with candidates
     std::vector<double> lambda_t;  // tangential multipliers, aligned with candidates (0 when frictionless)
     std::vector<double> torque;
@@ -272,6 +272,20 @@ class CompactionProblem {
   };
   State SaveState() const;
   void RestoreState(const State &s);
+
+  // Everything a restart needs to continue a run exactly where it stopped
+  // (checkpoint.hpp): the state, the one before it (the secant predictor's
+  // second point) and their pressures. The solver objects are rebuilt from it.
+  struct Snapshot {
+    State current, previous;
+    double pressure = 0.0, previous_pressure = 0.0;
+    bool have_previous = false;
+  };
+  Snapshot TakeSnapshot() const;
+  // Fails (PETSC_ERR_FILE_UNEXPECTED) when the snapshot does not fit the
+  // bodies added (unknown counts, candidates naming bodies or points that do
+  // not exist), i.e. was taken from another scene.
+  PetscErrorCode RestoreSnapshot(const Snapshot &s);
 
   StateSummary Summary() const;
   LayoutSizes Sizes();
