@@ -64,8 +64,6 @@ struct CompactOptions {
 };
 
 PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
-  char restart[PETSC_MAX_PATH_LEN] = "";
-  PetscBool restart_set = PETSC_FALSE;
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Mixture compaction", "deformix");
   PetscCall(PetscOptionsInt("-n_particles", "number of disks N_p", "", o->n_particles, &o->n_particles, nullptr));
@@ -84,16 +82,7 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
   PetscCall(PetscOptionsBool("-settle_frictionless",
                              "settle the packing without friction at min(first level, 1e-4 E), then switch friction on, solve again and step to the first level", "",
                              o->settle_frictionless, &o->settle_frictionless, nullptr));
-  PetscCall(PetscOptionsBool("-checkpoint", "write <output_dir>/checkpoint.h5 after every level (for -restart)", "",
-                             o->checkpoint, &o->checkpoint, nullptr));
-  PetscCall(PetscOptionsString("-restart",
-                               "continue the run saved in this checkpoint.h5: the scene options must be the same and its "
-                               "levels the first ones of -pressures",
-                               "", restart, restart, sizeof(restart), &restart_set));
   PetscOptionsEnd();
-  PetscCheck(!restart_set || restart[0], comm, PETSC_ERR_USER_INPUT,
-             "-restart needs the path of a checkpoint.h5, e.g. -restart out/compact/checkpoint.h5");
-  o->restart = restart;
   PetscCheck(o->n_particles >= 1 && o->n_particles <= 200000, comm, PETSC_ERR_USER_INPUT,
              "-n_particles %" PetscInt_FMT ": give between 1 and 200000 particles", o->n_particles);
   PetscCheck(o->kappa >= 0.0 && o->kappa <= 1.0, comm, PETSC_ERR_USER_INPUT,
@@ -105,6 +94,7 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
   const std::vector<double> defaults = {1e-4, 1e-3, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5};
   PetscCall(GetPressureList(comm, defaults, &o->pressures));
   PetscCall(GetOutputDirectory(comm, "out/compact", &o->output_dir));
+  PetscCall(GetRestartOptions(comm, &o->restart, &o->checkpoint));
   PetscFunctionReturn(0);
 }
 
@@ -122,35 +112,6 @@ const std::vector<std::string> kCurveColumns = {
     "cuts", "seconds", "max_penetration", "pseudo_time_steps", "symbolic_factorizations", "unknowns",
     "rigid_unknowns", "deformable_unknowns", "tangential_unknowns", "candidates", "jacobian_nonzeros",
     "force_residual_over_Pd", "relaxed_substeps", "gauge_torque_over_Pd2"};
-
-// Reads the checkpoint of -restart and checks that this run can continue it:
-// the same scene, the same curve columns, and its levels the first ones of
-// -pressures with at least one left to do. Nothing is written before.
-PetscErrorCode LoadRestart(MPI_Comm comm, const CompactOptions &opts, const CompactionScene &scene, Checkpoint *c) {
-  PetscFunctionBeginUser;
-  PetscCall(ReadCheckpoint(comm, opts.restart, c));
-  const std::string diff = SceneDifference(c->scene, scene);
-  PetscCheck(diff.empty(), comm, PETSC_ERR_USER_INPUT,
-             "-restart %s was written for another scene (%s): give the scene options of the run it continues",
-             opts.restart.c_str(), diff.c_str());
-  PetscCheck(c->packing.size() == opts.n_particles, comm, PETSC_ERR_FILE_UNEXPECTED,
-             "-restart %s holds %d disks for -n_particles %" PetscInt_FMT, opts.restart.c_str(), c->packing.size(),
-             opts.n_particles);
-  PetscCheck(c->columns == kCurveColumns, comm, PETSC_ERR_FILE_UNEXPECTED,
-             "-restart %s was written by another version of compact (its curve.csv columns differ)", opts.restart.c_str());
-  const size_t done = c->levels.size();
-  for (size_t i = 0; i < done; ++i) {
-    char given[32] = "nothing";
-    if (i < opts.pressures.size()) std::snprintf(given, sizeof(given), "%g", opts.pressures[i]);
-    PetscCheck(i < opts.pressures.size() && opts.pressures[i] == c->levels[i], comm, PETSC_ERR_USER_INPUT,
-               "-restart %s: its level %zu is P/E = %g, but -pressures has %s there; -pressures must begin with "
-               "the %zu levels of the checkpoint", opts.restart.c_str(), i, c->levels[i], given, done);
-  }
-  PetscCheck(opts.pressures.size() > done, comm, PETSC_ERR_USER_INPUT,
-             "-restart %s: the checkpoint already holds all %zu levels of -pressures; add levels to continue",
-             opts.restart.c_str(), done);
-  PetscFunctionReturn(0);
-}
 
 PetscErrorCode Run(MPI_Comm comm) {
   CompactOptions opts;
@@ -204,15 +165,24 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(load.SetFromOptions(comm));
   if (HelpRequested()) PetscFunctionReturn(0);
   PetscCall(CheckUnknownOptions(comm));
-  CompactionScene scene;
-  scene.n_particles = opts.n_particles, scene.kappa = opts.kappa, scene.seed = opts.seed;
-  scene.mesh_triangles = opts.mesh_triangles;
-  scene.young = params.young, scene.poisson = params.poisson, scene.friction = params.friction;
-  scene.deformable_contact = static_cast<int>(params.deformable_contact);
-  scene.constrain_rotation = params.constrain_rotation ? 1 : 0;
+  // The options that define the bodies and unknowns: a restart must repeat them.
+  const Scene scene = {{"n_particles", double(opts.n_particles)},
+                       {"kappa", opts.kappa},
+                       {"seed", double(opts.seed)},
+                       {"mesh_triangles", double(opts.mesh_triangles)},
+                       {"E", params.young},
+                       {"nu", params.poisson},
+                       {"friction", params.friction},
+                       {"contact_deformable", double(params.deformable_contact)},
+                       {"constrain_rotation", params.constrain_rotation ? 1.0 : 0.0}};
   const bool restarting = !opts.restart.empty();
   Checkpoint restart;
-  if (restarting) PetscCall(LoadRestart(comm, opts, scene, &restart));
+  if (restarting) {
+    PetscCall(LoadRestart(comm, opts.restart, "compact", scene, kCurveColumns, opts.pressures, &restart));
+    PetscCheck(restart.packing.size() == opts.n_particles, comm, PETSC_ERR_FILE_UNEXPECTED,
+               "-restart %s holds %d disks for -n_particles %" PetscInt_FMT, opts.restart.c_str(),
+               restart.packing.size(), opts.n_particles);
+  }
   PetscCall(PrepareOutputDirectory(comm, opts.output_dir));
   PetscCall(PetscLogStageRegister("Packing", &stage_pack));
   PetscCall(PetscLogStageRegister("Solve", &stage_solve));
@@ -233,8 +203,8 @@ PetscErrorCode Run(MPI_Comm comm) {
     SETERRQ(comm, PETSC_ERR_USER_INPUT, "scene set-up: %s", e.what());
   }
   PetscCall(PetscLogStagePop());
-  double phi0 = restart.phi_0, z0_no_rattlers = restart.z0_no_rattlers, z0_mirror = restart.z0_mirror;
-  double rattlers0 = restart.rattler_fraction;
+  double phi0 = restart.Value("phi_0"), z0_no_rattlers = restart.Value("Z_0_no_rattlers");
+  double z0_mirror = restart.Value("Z_0_mirror"), rattlers0 = restart.Value("rattler_fraction_0");
   if (!restarting) {
     const Coordination z0 = coordination(packing, contact_network(packing, 0.0), 3);
     phi0 = packing_fraction(packing);
@@ -304,7 +274,8 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(PetscPrintf(comm, "  %9s %8s %6s %6s %10s %8s %7s %6s %6s %8s\n", "P/E", "phi", "Z", "Z_nr", "P_sig/P",
                         "K/E", "slide", "newton", "steps", "seconds"));
   double step = restarting ? restart.load_step : -1.0;
-  double prev_phi = restarting ? restart.previous_phi : phi0, prev_P = restarting ? restart.previous_P : 0.0;
+  double prev_phi = restarting ? restart.Value("previous_phi") : phi0;
+  double prev_P = restarting ? restart.Value("previous_pressure") : 0.0;
   for (size_t level = rows.size(); level < opts.pressures.size(); ++level) {
     const double P_over_E = opts.pressures[level], P = P_over_E * params.young;
     LevelReport rep;
@@ -375,14 +346,19 @@ PetscErrorCode Run(MPI_Comm comm) {
     if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
     if (opts.checkpoint) {
       Checkpoint c;
+      c.driver = "compact";
       c.scene = scene;
       c.packing = packing;
-      c.phi_0 = phi0, c.z0_no_rattlers = z0_no_rattlers, c.z0_mirror = z0_mirror, c.rattler_fraction = rattlers0;
+      c.values = {{"phi_0", phi0},
+                  {"Z_0_no_rattlers", z0_no_rattlers},
+                  {"Z_0_mirror", z0_mirror},
+                  {"rattler_fraction_0", rattlers0},
+                  {"previous_phi", prev_phi},
+                  {"previous_pressure", prev_P}};
       c.levels.assign(opts.pressures.begin(), opts.pressures.begin() + level + 1);
       c.columns = kCurveColumns;
       c.rows = rows;
       c.load_step = step;
-      c.previous_phi = prev_phi, c.previous_P = prev_P;
       c.state = problem.TakeSnapshot();
       PetscCall(WriteCheckpoint(comm, opts.output_dir + "/checkpoint.h5", c));
     }

@@ -6,11 +6,13 @@ static const char help[] =
     "packing fraction phi_p = particle area / box area is exact equilibrium of\n"
     "    min  sum_e W(F) + P * box_area   subject to   gap(node, wall) >= 0,\n"
     "solved by semismooth Newton on the KKT system (PETSc SNES, MUMPS LU).\n\n"
-    "Writes <output_dir>/curve.csv (one row per level) and <output_dir>/levels.h5 (deformed meshes).\n\n"
+    "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (deformed meshes) and\n"
+    "<output_dir>/checkpoint.h5 (after every level: what -restart needs to continue the run).\n\n"
     "Examples:\n"
     "  build/bin/single-particle -mesh_triangles 92 -output_dir out/sp\n"
     "  build/bin/single-particle -pressures 0.5 -nu 0.4999 -newton_monitor\n"
-    "  mpirun -n 2 build/bin/single-particle -options_file petsc-options/single-particle.opts\n\n"
+    "  mpirun -n 2 build/bin/single-particle -options_file petsc-options/single-particle.opts\n"
+    "  build/bin/single-particle -pressures 1e-4,1e-3,0.01,0.1 -restart out/single-particle/checkpoint.h5\n\n"
     "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
     "each Newton iteration with the number of active contacts.\n\n";
 
@@ -22,6 +24,7 @@ static const char help[] =
 #include <string>
 #include <vector>
 
+#include "deformix/checkpoint.hpp"
 #include "deformix/disk_mesh.hpp"
 #include "deformix/load_controller.hpp"
 #include "deformix/options.hpp"
@@ -38,7 +41,13 @@ struct SingleParticleOptions {
   std::vector<double> pressures;
   std::string output_dir;
   PetscBool write_hdf5 = PETSC_TRUE;
+  PetscBool checkpoint = PETSC_TRUE;
+  std::string restart;  // checkpoint to continue from ("": a new run)
 };
+
+const std::vector<std::string> kCurveColumns = {
+    "P_over_E", "phi", "area_ratio", "newton_its", "seconds", "substeps", "cuts", "box_width", "box_height",
+    "wall_force_error", "max_penetration", "min_cell_area_ratio", "active_contacts"};
 
 PetscErrorCode ProcessOptions(MPI_Comm comm, SingleParticleOptions *o) {
   PetscFunctionBeginUser;
@@ -60,6 +69,7 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, SingleParticleOptions *o) {
   const std::vector<double> defaults = {1e-4, 1e-3, 5e-3, 0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5};
   PetscCall(GetPressureList(comm, defaults, &o->pressures));
   PetscCall(GetOutputDirectory(comm, "out/single-particle", &o->output_dir));
+  PetscCall(GetRestartOptions(comm, &o->restart, &o->checkpoint));
   PetscFunctionReturn(0);
 }
 
@@ -75,6 +85,16 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(load.SetFromOptions(comm));
   if (HelpRequested()) PetscFunctionReturn(0);
   PetscCall(CheckUnknownOptions(comm));
+  // The options that define the body and its unknowns: a restart must repeat them.
+  const Scene scene = {{"mesh_triangles", double(opts.mesh_triangles)},
+                       {"element_order", double(opts.element_order)},
+                       {"E", params.young},
+                       {"nu", params.poisson},
+                       {"constrain_rotation", params.constrain_rotation ? 1.0 : 0.0}};
+  const bool restarting = !opts.restart.empty();
+  Checkpoint restart;
+  if (restarting)
+    PetscCall(LoadRestart(comm, opts.restart, "single-particle", scene, kCurveColumns, opts.pressures, &restart));
   PetscCall(PrepareOutputDirectory(comm, opts.output_dir));
   PetscCall(PetscLogStageRegister("Solve", &stage_solve));
   PetscCall(PetscLogStageRegister("Output", &stage_output));
@@ -102,24 +122,31 @@ PetscErrorCode Run(MPI_Comm comm) {
   }
   problem.SetWalls(walls);
   const StateSummary s0 = problem.Summary();
+  if (restarting) PetscCall(problem.RestoreSnapshot(restart.state));
   PetscCall(PetscPrintf(comm,
                         "single-particle: %d triangles (order %d, min angle %.1f deg), %d nodes, E = %g, nu = %g\n"
                         "  phi_p at P = 0: %.6f (pi/4 = %.6f)\n",
                         mesh.num_cells(), mesh.order, min_angle_degrees(mesh), mesh.num_nodes(), params.young,
                         params.poisson, s0.packing_fraction, M_PI / 4));
+  if (restarting)
+    PetscCall(PetscPrintf(comm, "  restart from %s: %zu level(s) done (last P/E = %g), continuing with P/E = %g\n",
+                          opts.restart.c_str(), restart.levels.size(), restart.levels.back(),
+                          opts.pressures[restart.levels.size()]));
 
   // 3. Levels: solve, measure, write.
   CsvWriter curve;
-  PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv",
-                       {"P_over_E", "phi", "area_ratio", "newton_its", "seconds", "substeps", "cuts", "box_width",
-                        "box_height", "wall_force_error", "max_penetration", "min_cell_area_ratio", "active_contacts"}));
+  PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv", kCurveColumns));
+  std::vector<std::vector<double>> rows = restart.rows;  // the curve so far (checkpoints repeat it)
+  for (const std::vector<double> &row : rows) PetscCall(curve.Row(row));
   const std::string h5 = opts.output_dir + "/levels.h5";
-  // Results of an earlier run in this directory must not mix with this one.
-  PetscCall(RemoveFile(comm, h5));
+  // Results of an earlier run in this directory must not mix with this one;
+  // a restarted run keeps the levels before its checkpoint.
+  if (restarting) PetscCall(TruncateLevelsHDF5(comm, h5, static_cast<int>(rows.size())));
+  else PetscCall(RemoveFile(comm, h5));
   PetscCall(PetscPrintf(comm, "  %10s %10s %10s %6s %6s %9s\n", "P/E", "phi_p", "area_ratio", "newton", "steps",
                         "seconds"));
-  double step = -1.0;
-  for (size_t level = 0; level < opts.pressures.size(); ++level) {
+  double step = restarting ? restart.load_step : -1.0;
+  for (size_t level = rows.size(); level < opts.pressures.size(); ++level) {
     const double P_over_E = opts.pressures[level];
     LevelReport rep;
     PetscCall(PetscLogStagePush(stage_solve));
@@ -135,14 +162,26 @@ PetscErrorCode Run(MPI_Comm comm) {
     PetscCall(PetscPrintf(comm, "  %10.4g %10.6f %10.6f %6" PetscInt_FMT " %6d %9.3f\n", P_over_E,
                           s.packing_fraction, s.area_ratio, rep.newton_its, rep.substeps, rep.seconds));
     PetscCall(PetscLogStagePush(stage_output));
-    PetscCall(curve.Row({P_over_E, s.packing_fraction, s.area_ratio, static_cast<double>(rep.newton_its), rep.seconds,
-                         static_cast<double>(rep.substeps), static_cast<double>(rep.cuts), s.box_width, s.box_height,
-                         wall_err, s.max_penetration, s.min_cell_area_ratio, static_cast<double>(s.active_contacts)}));
+    rows.push_back({P_over_E, s.packing_fraction, s.area_ratio, static_cast<double>(rep.newton_its), rep.seconds,
+                    static_cast<double>(rep.substeps), static_cast<double>(rep.cuts), s.box_width, s.box_height,
+                    wall_err, s.max_penetration, s.min_cell_area_ratio, static_cast<double>(s.active_contacts)});
+    PetscCall(curve.Row(rows.back()));
     if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
+    if (opts.checkpoint) {
+      Checkpoint c;
+      c.driver = "single-particle";
+      c.scene = scene;
+      c.levels.assign(opts.pressures.begin(), opts.pressures.begin() + level + 1);
+      c.columns = kCurveColumns;
+      c.rows = rows;
+      c.load_step = step;
+      c.state = problem.TakeSnapshot();
+      PetscCall(WriteCheckpoint(comm, opts.output_dir + "/checkpoint.h5", c));
+    }
     PetscCall(PetscLogStagePop());
   }
-  PetscCall(PetscPrintf(comm, "  wrote %s/curve.csv%s\n", opts.output_dir.c_str(),
-                        opts.write_hdf5 ? " and levels.h5" : ""));
+  PetscCall(PetscPrintf(comm, "  wrote %s/curve.csv%s%s\n", opts.output_dir.c_str(),
+                        opts.write_hdf5 ? ", levels.h5" : "", opts.checkpoint ? ", checkpoint.h5" : ""));
   PetscFunctionReturn(0);
 }
 

@@ -2,7 +2,7 @@
 
 #include <hdf5.h>
 
-#include <cmath>
+#include <algorithm>
 #include <cstdio>
 #include <sstream>
 #include <stdexcept>
@@ -154,47 +154,53 @@ CompactionProblem::State read_state(hid_t file, const char *name, double *pressu
   return s;
 }
 
-// The scene as attributes of the root group.
-struct SceneField {
-  const char *option;
-  double CompactionScene::*real;
-  PetscInt CompactionScene::*integer;
-  int CompactionScene::*flag;
-};
-const SceneField kSceneFields[] = {
-    {"n_particles", nullptr, &CompactionScene::n_particles, nullptr},
-    {"kappa", &CompactionScene::kappa, nullptr, nullptr},
-    {"seed", nullptr, &CompactionScene::seed, nullptr},
-    {"mesh_triangles", nullptr, &CompactionScene::mesh_triangles, nullptr},
-    {"E", &CompactionScene::young, nullptr, nullptr},
-    {"nu", &CompactionScene::poisson, nullptr, nullptr},
-    {"friction", &CompactionScene::friction, nullptr, nullptr},
-    {"contact_deformable", nullptr, nullptr, &CompactionScene::deformable_contact},
-    {"constrain_rotation", nullptr, nullptr, &CompactionScene::constrain_rotation},
-};
-
-double get(const CompactionScene &s, const SceneField &f) {
-  return f.real ? s.*(f.real) : f.integer ? static_cast<double>(s.*(f.integer)) : static_cast<double>(s.*(f.flag));
+void write_values(hid_t file, const char *name, const std::vector<SceneValue> &values) {
+  H5Id g(H5Gcreate2(file, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose, name);
+  for (const SceneValue &v : values) write_attribute(g, v.option.c_str(), v.value);
 }
 
-void set(CompactionScene *s, const SceneField &f, double v) {
-  if (f.real) s->*(f.real) = v;
-  else if (f.integer) s->*(f.integer) = static_cast<PetscInt>(std::llround(v));
-  else s->*(f.flag) = static_cast<int>(std::lround(v));
+herr_t collect_name(hid_t, const char *name, const H5A_info_t *, void *names) {
+  static_cast<std::vector<std::string> *>(names)->push_back(name);
+  return 0;
+}
+
+std::vector<SceneValue> read_values(hid_t file, const char *name) {
+  H5Id g(H5Gopen2(file, name, H5P_DEFAULT), H5Gclose, std::string("group ") + name + " is missing");
+  std::vector<std::string> names;
+  check(H5Aiterate2(g, H5_INDEX_NAME, H5_ITER_INC, nullptr, collect_name, &names), name);
+  std::vector<SceneValue> values;
+  for (const std::string &n : names) values.push_back({n, read_attribute(g, n.c_str())});
+  return values;
+}
+
+std::string format_difference(const std::string &option, const std::string &saved, const std::string &run) {
+  return "-" + option + ": checkpoint " + saved + ", this run " + run;
+}
+
+std::string number(double v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
 }
 
 }  // namespace
 
-std::string SceneDifference(const CompactionScene &saved, const CompactionScene &run) {
-  for (const SceneField &f : kSceneFields) {
-    const double a = get(saved, f), b = get(run, f);
-    if (a != b) {
-      std::ostringstream os;
-      os << "-" << f.option << ": checkpoint " << a << ", this run " << b;
-      return os.str();
-    }
+std::string SceneDifference(const Scene &saved, const Scene &run) {
+  for (const SceneValue &r : run) {
+    auto it = std::find_if(saved.begin(), saved.end(), [&](const SceneValue &s) { return s.option == r.option; });
+    if (it == saved.end()) return format_difference(r.option, "none", number(r.value));
+    if (it->value != r.value) return format_difference(r.option, number(it->value), number(r.value));
   }
+  for (const SceneValue &s : saved)
+    if (std::none_of(run.begin(), run.end(), [&](const SceneValue &r) { return s.option == r.option; }))
+      return format_difference(s.option, number(s.value), "none");
   return "";
+}
+
+double Checkpoint::Value(const std::string &name) const {
+  for (const SceneValue &v : values)
+    if (v.option == name) return v.value;
+  return 0.0;
 }
 
 PetscErrorCode WriteCheckpoint(MPI_Comm comm, const std::string &path, const Checkpoint &c) {
@@ -209,15 +215,11 @@ PetscErrorCode WriteCheckpoint(MPI_Comm comm, const std::string &path, const Che
       {
         H5Id file(H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose, "cannot create " + tmp);
         write_attribute(file, "format", kFormat);
-        for (const SceneField &f : kSceneFields) write_attribute(file, f.option, get(c.scene, f));
+        write_string_attribute(file, "driver", c.driver);
         write_attribute(file, "load_step", c.load_step);
-        write_attribute(file, "previous_phi", c.previous_phi);
-        write_attribute(file, "previous_pressure", c.previous_P);
-        write_attribute(file, "phi_0", c.phi_0);
-        write_attribute(file, "Z_0_no_rattlers", c.z0_no_rattlers);
-        write_attribute(file, "Z_0_mirror", c.z0_mirror);
-        write_attribute(file, "rattler_fraction_0", c.rattler_fraction);
         write_attribute(file, "have_previous", c.state.have_previous ? 1.0 : 0.0);
+        write_values(file, "scene", c.scene);
+        write_values(file, "values", c.values);
         write_array(file, "levels", c.levels);
         std::vector<double> rows;
         for (const std::vector<double> &r : c.rows) rows.insert(rows.end(), r.begin(), r.end());
@@ -269,14 +271,10 @@ PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, Checkpoint
       os << "its format is " << format << ", this build reads format " << kFormat;
       throw H5Failure(os.str());
     }
-    for (const SceneField &f : kSceneFields) set(&c->scene, f, read_attribute(file, f.option));
+    c->driver = read_string_attribute(file, "driver");
+    c->scene = read_values(file, "scene");
+    c->values = read_values(file, "values");
     c->load_step = read_attribute(file, "load_step");
-    c->previous_phi = read_attribute(file, "previous_phi");
-    c->previous_P = read_attribute(file, "previous_pressure");
-    c->phi_0 = read_attribute(file, "phi_0");
-    c->z0_no_rattlers = read_attribute(file, "Z_0_no_rattlers");
-    c->z0_mirror = read_attribute(file, "Z_0_mirror");
-    c->rattler_fraction = read_attribute(file, "rattler_fraction_0");
     c->state.have_previous = read_attribute(file, "have_previous") != 0.0;
     c->levels = read_array<double>(file, "levels");
     {
@@ -309,6 +307,34 @@ PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, Checkpoint
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm));
   PetscCheck(!failed, comm, PETSC_ERR_FILE_READ, "-restart %s: %s", path.c_str(),
              error.empty() ? "another rank could not read it" : error.c_str());
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode LoadRestart(MPI_Comm comm, const std::string &path, const std::string &driver, const Scene &scene,
+                           const std::vector<std::string> &columns, const std::vector<double> &pressures,
+                           Checkpoint *c) {
+  PetscFunctionBeginUser;
+  PetscCall(ReadCheckpoint(comm, path, c));
+  PetscCheck(c->driver == driver, comm, PETSC_ERR_USER_INPUT, "-restart %s was written by %s, not by %s", path.c_str(),
+             c->driver.c_str(), driver.c_str());
+  const std::string diff = SceneDifference(c->scene, scene);
+  PetscCheck(diff.empty(), comm, PETSC_ERR_USER_INPUT,
+             "-restart %s was written for another scene (%s): give the scene options of the run it continues",
+             path.c_str(), diff.c_str());
+  PetscCheck(c->columns == columns, comm, PETSC_ERR_FILE_UNEXPECTED,
+             "-restart %s was written by another version of %s (its curve.csv columns differ)", path.c_str(),
+             driver.c_str());
+  const size_t done = c->levels.size();
+  for (size_t i = 0; i < done; ++i) {
+    char given[32] = "nothing";
+    if (i < pressures.size()) std::snprintf(given, sizeof(given), "%g", pressures[i]);
+    PetscCheck(i < pressures.size() && pressures[i] == c->levels[i], comm, PETSC_ERR_USER_INPUT,
+               "-restart %s: its level %zu is P/E = %g, but -pressures has %s there; -pressures must begin with "
+               "the %zu levels of the checkpoint", path.c_str(), i, c->levels[i], given, done);
+  }
+  PetscCheck(pressures.size() > done, comm, PETSC_ERR_USER_INPUT,
+             "-restart %s: the checkpoint already holds all %zu levels of -pressures; add levels to continue",
+             path.c_str(), done);
   PetscFunctionReturn(0);
 }
 

@@ -56,6 +56,24 @@ PetscErrorCode GetOutputDirectory(MPI_Comm comm, const std::string &fallback, st
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode GetRestartOptions(MPI_Comm comm, std::string *restart, PetscBool *checkpoint) {
+  char buf[PETSC_MAX_PATH_LEN] = "";
+  PetscBool set = PETSC_FALSE;
+  PetscFunctionBeginUser;
+  PetscOptionsBegin(comm, nullptr, "Checkpoints", "deformix");
+  PetscCall(PetscOptionsBool("-checkpoint", "write <output_dir>/checkpoint.h5 after every level (for -restart)", "",
+                             *checkpoint, checkpoint, nullptr));
+  PetscCall(PetscOptionsString("-restart",
+                               "continue the run saved in this checkpoint.h5: the scene options must be the same and its "
+                               "levels the first ones of -pressures",
+                               "", buf, buf, sizeof(buf), &set));
+  PetscOptionsEnd();
+  PetscCheck(!set || buf[0], comm, PETSC_ERR_USER_INPUT,
+             "-restart needs the path of a checkpoint.h5, e.g. -restart out/compact/checkpoint.h5");
+  *restart = buf;
+  PetscFunctionReturn(0);
+}
+
 static int MakeDirectories(const std::string &dir) {
   std::string partial;
   size_t pos = 0;

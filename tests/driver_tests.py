@@ -15,6 +15,9 @@ Cases
   help                     -help exits 0, lists the driver options with defaults, writes nothing
   unused-option            a misspelt option is refused by name before anything is written
   mpi --mpiexec BIN        curve.csv and levels.h5 of -n 2 and -n 3 equal the serial run
+  restart                  a run stopped after two levels and continued with -restart from its
+                           checkpoint.h5 repeats the three-level run bit for bit (curve.csv but
+                           its seconds, levels.h5); a checkpoint of another scene or driver is refused
 
 Every run's curve.csv is checked row by row: no inverted element
 (min_cell_area_ratio > 0), no penetration, wall balance, phi <= 1.
@@ -290,6 +293,46 @@ def case_mpi(args):
             check(drift <= 1e-6, f"rigid drift of the box centre {drift:.2e} <= 1e-6 d")
 
 
+def case_restart(args):
+    levels = [0.01, 0.1, 0.3]
+    full = fresh_dir(os.path.join(args.workdir, "restart-full"))
+    part = fresh_dir(os.path.join(args.workdir, "restart-part"))
+    lv = ",".join(map(str, levels))
+    rc, _ = run([args.driver, "-output_dir", full, "-pressures", lv])
+    check(rc == 0, f"three-level run: exit code {rc}")
+    rc, _ = run([args.driver, "-output_dir", part, "-pressures", ",".join(map(str, levels[:2]))])
+    check(rc == 0, f"two-level run: exit code {rc}")
+    ckpt = os.path.join(part, "checkpoint.h5")
+    saved = os.path.join(args.workdir, "two-levels.h5")
+    shutil.copy(ckpt, saved)
+    rc, log = run([args.driver, "-output_dir", part, "-pressures", lv, "-restart", ckpt])
+    check(rc == 0 and "restart from" in log, f"restart for the third level: exit code {rc}")
+    a, b = read_curve(os.path.join(full, "curve.csv")), read_curve(os.path.join(part, "curve.csv"))
+    check(len(a) == len(b) == 3, f"restarted curve has {len(b)} rows (3)")
+    for ra, rb in zip(a, b):
+        diff = [k for k in ra if k != "seconds" and ra[k] != rb[k]]
+        check(not diff, f"P/E = {ra['P_over_E']:g}: restarted row equals the uninterrupted one (differs in {diff})")
+    import h5py
+    import numpy
+    with h5py.File(os.path.join(full, "levels.h5"), "r") as fa, h5py.File(os.path.join(part, "levels.h5"), "r") as fb:
+        check(sorted(fa.keys()) == sorted(fb.keys()), "levels.h5: the same levels")
+        same = all(numpy.array_equal(fa[g]["body_0"]["coordinates"][()], fb[g]["body_0"]["coordinates"][()])
+                   for g in fa.keys() if g in fb)
+        check(same, "levels.h5: node coordinates of every level equal bit for bit")
+    other = os.path.join(args.workdir, "other-driver.h5")
+    shutil.copy(saved, other)
+    with h5py.File(other, "r+") as f:
+        del f.attrs["driver"]
+        f.attrs.create("driver", numpy.bytes_("compact"))
+    for extra, expect in ((["-restart", saved, "-nu", "0.49"], r"another scene \(-nu: checkpoint 0\.495, this run 0\.49\)"),
+                          (["-restart", saved, "-mesh_triangles", "54"], r"-mesh_triangles: checkpoint 92, this run 54"),
+                          (["-restart", other], r"was written by compact, not by single-particle")):
+        ref = make_sentinel(os.path.join(args.workdir, "restart-bad"))
+        rc, log = run([args.driver, "-output_dir", os.path.join(args.workdir, "restart-bad"), "-pressures", lv] + extra)
+        check(rc != 0 and re.search(expect, log) is not None, f"{' '.join(extra[2:]) or 'driver'}: refused, /{expect}/")
+        check_untouched(os.path.join(args.workdir, "restart-bad"), ref)
+
+
 CASES = {
     "stability-unit-load": case_stability_unit_load,
     "stability-incompressible": case_stability_incompressible,
@@ -300,6 +343,7 @@ CASES = {
     "help": case_help,
     "unused-option": case_unused_option,
     "mpi": case_mpi,
+    "restart": case_restart,
 }
 
 

@@ -1,24 +1,25 @@
-// Checkpoints of the mixture driver: after every pressure level, everything
-// needed to continue the run as if it had never stopped (compact -restart).
+// Checkpoints of the drivers: after every pressure level, everything
+// needed to continue the run as if it had never stopped (-restart FILE).
 //
 // A checkpoint holds
-//   - the scene options (N_p, kappa, seed, mesh, E, nu, friction, contact
-//     law, rotation gauges), which a restart must repeat: they define the
-//     bodies and the unknowns the state refers to;
-//   - the packing the bodies were built from (after the rigid settling), so a
-//     restart neither regenerates nor re-settles it;
+//   - the driver's name and its scene options (compact: N_p, kappa, seed,
+//     mesh, E, nu, friction, contact law, rotation gauges), which a restart
+//     must repeat: they define the bodies and the unknowns the state refers to;
+//   - compact: the packing the bodies were built from (after the rigid
+//     settling), so a restart neither regenerates nor re-settles it;
 //   - the levels done and their curve.csv rows (a restarted run writes the
 //     whole curve again, then continues it);
-//   - the load controller's suggested step, the last level's phi and P (the
-//     finite-difference bulk modulus of the next level);
+//   - the load controller's suggested step and driver-specific numbers
+//     (compact: the last level's phi and P, for the finite-difference bulk
+//     modulus of the next level);
 //   - the solver state and the one before it (CompactionProblem::Snapshot):
 //     displacements, walls, gauges, candidates and their multipliers.
 // On one rank a restarted run repeats the uninterrupted one bit for bit; on
 // another number of ranks it agrees to solver tolerance, as any run does.
 //
 // File layout (HDF5):
-//   /                     attributes: format, the scene, load_step,
-//                         previous_phi, previous_pressure, phi_0, Z_0 values
+//   /                     attributes: format, driver, load_step, have_previous
+//   /scene, /values       one attribute per scene option / driver number
 //   /levels               P/E of the levels done
 //   /curve                their curve.csv rows (attribute "columns": the header)
 //   /packing              x, y, radius, deformable (N_p x 4);  /walls (4)
@@ -38,32 +39,29 @@
 
 namespace deformix {
 
-// The options that define the bodies and unknowns of a compaction run.
-struct CompactionScene {
-  PetscInt n_particles = 0;
-  double kappa = 0.0;
-  PetscInt seed = 0;
-  PetscInt mesh_triangles = 0;
-  double young = 0.0, poisson = 0.0, friction = 0.0;
-  int deformable_contact = 0;  // DeformableContact
-  int constrain_rotation = 0;
+// The options that define the bodies and unknowns of a run, by name
+// ("kappa", "mesh_triangles", ...): a restart must repeat them.
+struct SceneValue {
+  std::string option;
+  double value;
 };
+using Scene = std::vector<SceneValue>;
 
 // "" when `run` repeats `saved`, otherwise the first difference as
 // "-kappa: checkpoint 0.5, this run 0.8".
-std::string SceneDifference(const CompactionScene &saved, const CompactionScene &run);
+std::string SceneDifference(const Scene &saved, const Scene &run);
 
 struct Checkpoint {
-  CompactionScene scene;
-  DiskPacking packing;
-  double phi_0 = 0.0;                 // the jammed rigid packing (printed again on restart)
-  double z0_no_rattlers = 0.0, z0_mirror = 0.0, rattler_fraction = 0.0;
+  std::string driver;                 // the executable that wrote it
+  Scene scene;
+  DiskPacking packing;                // compact: the packing the bodies were built from (empty otherwise)
+  std::vector<SceneValue> values;     // driver-specific numbers (phi_0, the last level's phi, ...)
   std::vector<double> levels;         // P/E of the levels done, in order
   std::vector<std::string> columns;   // curve.csv header
   std::vector<std::vector<double>> rows;  // one curve.csv row per level done
   double load_step = -1.0;            // the load controller's suggested increment
-  double previous_phi = 0.0, previous_P = 0.0;  // phi and pressure P (not P/E) of the last level
   CompactionProblem::Snapshot state;
+  double Value(const std::string &name) const;  // an entry of `values` (0 if absent)
 };
 
 // Collective; rank 0 writes.
@@ -71,5 +69,11 @@ PetscErrorCode WriteCheckpoint(MPI_Comm comm, const std::string &path, const Che
 // Collective; fails with a message naming the file and what is wrong with it
 // (missing, not HDF5, not a deformix checkpoint, incomplete).
 PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, Checkpoint *c);
+// Reads `path` and checks that this run can continue it: written by `driver`
+// for the same scene and curve columns, and `pressures` beginning with its
+// levels with at least one left to do. Collective; nothing is written.
+PetscErrorCode LoadRestart(MPI_Comm comm, const std::string &path, const std::string &driver, const Scene &scene,
+                           const std::vector<std::string> &columns, const std::vector<double> &pressures,
+                           Checkpoint *c);
 
 }  // namespace deformix
