@@ -65,8 +65,10 @@ def main():
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "campaign"))
     ap.add_argument("--extra", default="", help="extra compact options")
     ap.add_argument("--fit-only", action="store_true", help="reuse finished runs")
+    ap.add_argument("--exe", default=os.path.join(ROOT, "build", "bin", "compact"),
+                    help="compact executable (a copy lets the build directory change while the campaign runs)")
     a = ap.parse_args()
-    exe = os.path.join(ROOT, "build", "bin", "compact")
+    exe = a.exe
     if not os.path.exists(exe):
         sys.exit(f"{exe} not found: build first")
     os.makedirs(a.out, exist_ok=True)

@@ -76,6 +76,10 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsReal("-newton_max_move",
                              "largest move of a body per Newton step / <d>; longer steps are scaled down (0: no limit)", "",
                              newton_max_move, &newton_max_move, nullptr));
+  PetscCall(PetscOptionsBool("-ptc_retry_fb",
+                             "pseudo-transient continuation: after a failed inner solve, use the Fischer-Burmeister NCP "
+                             "function for the rest of the sub-step",
+                             "", ptc_retry_fb, &ptc_retry_fb, nullptr));
   PetscCall(PetscOptionsReal("-contact_margin", "contact candidates: gap below margin x mean diameter", "",
                              contact_margin, &contact_margin, nullptr));
   PetscCall(PetscOptionsEList("-contact_deformable",
@@ -795,9 +799,9 @@ PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal snor
   PetscInt maxit, maxf;
   PetscFunctionBeginUser;
   PetscCall(SNESGetTolerances(snes, &atol, &rtol, &stol, &maxit, &maxf));
-  const bool changed = p->active_now_ != p->active_checked_;
-  int changed_any = changed ? 1 : 0;
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &changed_any, 1, MPI_INT, MPI_MAX, p->comm_));
+  // The contact states are reduced over the ranks in FormFunction, so every
+  // rank finds the same answer here.
+  const bool changed_any = p->active_now_ != p->active_checked_;
   // How far from its switch is the most decided of the contacts that changed
   // state (each rank knows the margins of those it owns, the others are 0;
   // changed_any is the same on every rank, so the reduction is collective).
@@ -1366,7 +1370,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       // uses Fischer-Burmeister, which is smooth there, for the rest of the sub-step.
       if (ptc && outer < max_outer && ++failures <= 8) {
         move *= 0.25;
-        ncp_now_ = NcpFunction::FischerBurmeister;
+        if (params_.ptc_retry_fb) ncp_now_ = NcpFunction::FischerBurmeister;
         continue;
       }
       rho_anchor_ = 0.0;
@@ -1434,9 +1438,9 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     const double phi = Summary().packing_fraction;
     if (monitor_outer_) {
       PetscCall(PetscPrintf(comm_,
-                            "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)  |F|_inf %.3e  move %.2e  its %" PetscInt_FMT "%s\n",
+                            "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)  |F|_inf %.3e  phi %.7f  move %.2e  its %" PetscInt_FMT "%s\n",
                             outer, (double)true_norm, std::sqrt(part[0]), std::sqrt(part[1]), std::sqrt(part[2]),
-                            std::sqrt(part[3]), std::sqrt(part[4]), force_residual, move, its,
+                            std::sqrt(part[3]), std::sqrt(part[4]), force_residual, phi, move, its,
                             stale ? "  (candidates refreshed)" : ""));
     }
     report->force_residual = force_residual;

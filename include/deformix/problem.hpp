@@ -126,6 +126,7 @@ struct ProblemParameters {
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
+  PetscBool ptc_retry_fb = PETSC_TRUE;       // after a failed inner solve, Fischer-Burmeister for the rest of the sub-step
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   DeformableContact deformable_contact = DeformableContact::NodeToSegment;  // law of deformable-deformable pairs
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
