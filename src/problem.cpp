@@ -1366,8 +1366,11 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
                               SNESConvergedReasons[report->reason], its, rho_anchor_));
       // Retry from the anchor with shorter pseudo-time steps, or give up.
       // A failed inner solve is usually an active-set cycle of the min NCP
-      // function on weakly active contacts (lambda ~ 0, g ~ 0); the retry
-      // uses Fischer-Burmeister, which is smooth there, for the rest of the sub-step.
+      // function on weakly active contacts (lambda ~ 0, g ~ 0); with
+      // ptc_retry_fb the retry uses Fischer-Burmeister, which is smooth
+      // there, for the rest of the sub-step. (With the mortar law that made
+      // the contact rows cycle at frozen geometry instead: compact turns it
+      // off, docs/validation.md, session 9.)
       if (ptc && outer < max_outer && ++failures <= 8) {
         move *= 0.25;
         if (params_.ptc_retry_fb) ncp_now_ = NcpFunction::FischerBurmeister;

@@ -25,7 +25,7 @@
 // node of one deformable disk against the boundary of another: by default
 // the node's own gap (curve_node; -contact_deformable nts or two_pass), or
 // the node's gap averaged over its cell of the slave boundary (mortar_node,
-// -contact_deformable mortar), both against the smooth curve through the
+// -contact_deformable mortar, the compact driver's default), both against the smooth curve through the
 // master's boundary nodes, so the contact may slide over a segment inside
 // one solve with a C1 gap. Walls are frictionless.
 //
