@@ -358,6 +358,7 @@ PetscErrorCode Run(MPI_Comm comm) {
       Checkpoint c;
       c.driver = "compact";
       c.scene = scene;
+      c.columns = kCurveColumns;
       c.packing = packing;
       c.values = {{"phi_0", phi0},
                   {"Z_0_no_rattlers", z0_no_rattlers},
@@ -365,12 +366,8 @@ PetscErrorCode Run(MPI_Comm comm) {
                   {"rattler_fraction_0", rattlers0},
                   {"previous_phi", prev_phi},
                   {"previous_pressure", prev_P}};
-      c.levels.assign(opts.pressures.begin(), opts.pressures.begin() + level + 1);
-      c.columns = kCurveColumns;
-      c.rows = rows;
-      c.load_step = step;
-      c.state = problem.TakeSnapshot();
-      PetscCall(WriteCheckpoint(comm, opts.output_dir + "/checkpoint.h5", c));
+      PetscCall(WriteLevelCheckpoint(comm, opts.output_dir + "/checkpoint.h5", opts.pressures, level, rows, step,
+                                     problem, &c));
     }
     PetscCall(PetscLogStagePop());
   }

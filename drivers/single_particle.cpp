@@ -171,12 +171,9 @@ PetscErrorCode Run(MPI_Comm comm) {
       Checkpoint c;
       c.driver = "single-particle";
       c.scene = scene;
-      c.levels.assign(opts.pressures.begin(), opts.pressures.begin() + level + 1);
       c.columns = kCurveColumns;
-      c.rows = rows;
-      c.load_step = step;
-      c.state = problem.TakeSnapshot();
-      PetscCall(WriteCheckpoint(comm, opts.output_dir + "/checkpoint.h5", c));
+      PetscCall(WriteLevelCheckpoint(comm, opts.output_dir + "/checkpoint.h5", opts.pressures, level, rows, step,
+                                     problem, &c));
     }
     PetscCall(PetscLogStagePop());
   }

@@ -251,6 +251,18 @@ PetscErrorCode WriteCheckpoint(MPI_Comm comm, const std::string &path, const Che
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode WriteLevelCheckpoint(MPI_Comm comm, const std::string &path, const std::vector<double> &pressures,
+                                    size_t level, const std::vector<std::vector<double>> &rows, double load_step,
+                                    const CompactionProblem &problem, Checkpoint *c) {
+  PetscFunctionBeginUser;
+  c->levels.assign(pressures.begin(), pressures.begin() + level + 1);
+  c->rows = rows;
+  c->load_step = load_step;
+  c->state = problem.TakeSnapshot();
+  PetscCall(WriteCheckpoint(comm, path, *c));
+  PetscFunctionReturn(0);
+}
+
 PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, Checkpoint *c) {
   PetscFunctionBeginUser;
   std::string error;

@@ -66,6 +66,12 @@ struct Checkpoint {
 
 // Collective; rank 0 writes.
 PetscErrorCode WriteCheckpoint(MPI_Comm comm, const std::string &path, const Checkpoint &c);
+// After level `level` of `pressures`: completes `c` (whose driver, scene,
+// columns, packing and values the driver has set) with the levels done, the
+// curve rows, the load step and the problem's state, and writes it.
+PetscErrorCode WriteLevelCheckpoint(MPI_Comm comm, const std::string &path, const std::vector<double> &pressures,
+                                    size_t level, const std::vector<std::vector<double>> &rows, double load_step,
+                                    const CompactionProblem &problem, Checkpoint *c);
 // Collective; fails with a message naming the file and what is wrong with it
 // (missing, not HDF5, not a deformix checkpoint, incomplete).
 PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, Checkpoint *c);
