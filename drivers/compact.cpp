@@ -11,6 +11,8 @@ static const char help[] =
     "automatic sub-stepping, each level being equilibrium of\n"
     "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
     "solved by semismooth Newton in one PETSc SNES (MUMPS LU) inside pseudo-transient continuation.\n"
+    "Deformable pairs meet through a mortar (cell-averaged) gap of the slave's boundary nodes against\n"
+    "the master's contact curve (-contact_deformable mortar; nts and two_pass are node-to-segment).\n"
     "A level is accepted at exact equilibrium or by the paper's criterion: unbalanced forces\n"
     "<= -level_force_rtol x P <d>, phi settled to -level_phi_rtol, contact conditions exact.\n\n"
     "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (the state of every\n"
