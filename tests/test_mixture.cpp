@@ -270,10 +270,15 @@ TEST(CoulombLaw, SwitchMarginsOfChangedStates) {
 // The rotation gauges of the deformable disks hold while friction is off and
 // are released (zero torque) once it acts: friction then loads the disks with
 // torques that a gauge would otherwise carry.
-TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
+// Zero penetration, multiplier signs, complementarity and the Coulomb cone
+// in a random 20-disk mixture (kappa 0.5, friction 0.2), two levels, with
+// the deformable pairs' contact law `law`.
+void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb) {
   DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
   assign_deformable(packing, 0.5, 1);
   ProblemParameters p;
+  p.deformable_contact = law;
+  p.ptc_retry_fb = retry_fb;
   p.friction = 0.2;
   p.constrain_rotation = PETSC_TRUE;
   p.ptc_move = 0.02;
@@ -315,6 +320,16 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
     std::printf("  P/E = %g: largest gauge torque %.3e P <d>^2\n", P, problem.Summary().max_gauge_torque / (P * d * d));
     if (level > 1) EXPECT_LE(problem.Summary().max_gauge_torque, 1e-12 * P * d * d) << "gauge not released under friction";
   }
+}
+
+TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
+  CheckRandomTwentyDiskMixture(DeformableContact::NodeToSegment, PETSC_TRUE);
+}
+
+// The same with compact's defaults: mortar gaps (ContactForce::gap is then
+// the slave node's weighted gap) and no Fischer-Burmeister retry.
+TEST(Mixture, RandomTwentyDiskMixtureWithFrictionMortar) {
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE);
 }
 
 // A 12-disk all-deformable packing (40-triangle disks) with two-pass
