@@ -27,7 +27,8 @@ static const char help[] =
     "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
     "each Newton iteration with the numbers of closed and sliding contacts, -newton_monitor_contacts\n"
     "the contacts whose state changed (to see an active-set cycle), -ptc_monitor each\n"
-    "pseudo-time step (residual by block, largest unbalanced force and where it acts).\n\n";
+    "pseudo-time step (residual by block, largest unbalanced force and where it acts); without it,\n"
+    "a sub-step that runs long prints a progress line every -progress_interval seconds (default 60).\n\n";
 
 #include <petscsnes.h>
 

@@ -110,10 +110,21 @@ def run_compact(cmd, run_dir, timeout, env):
     return status, wall, levels, mem
 
 
-def level_rows(levels):
-    """(level, P_over_E, phi, Z, newton_its, substeps, pseudo_time_steps, unknowns, candidates, seconds) per level, plus 'all'."""
+def checkpoint_levels(path):
+    """Number of levels done in a compact checkpoint (their rows are repeated in a restarted run's curve.csv)."""
+    import h5py
+    try:
+        with h5py.File(path, "r") as f:
+            return len(f["levels"])
+    except (OSError, KeyError) as e:
+        sys.exit(f"--restart {path}: not a readable compact checkpoint ({e})")
+
+
+def level_rows(levels, first=0):
+    """(level, P_over_E, phi, Z, newton_its, substeps, pseudo_time_steps, unknowns, candidates, seconds) per level, plus 'all'.
+    Levels are numbered from `first` (the levels a restart continued from are not in `levels`)."""
     keys = ["P_over_E", "phi", "Z", "newton_its", "substeps", "pseudo_time_steps", "unknowns", "candidates", "seconds"]
-    rows = [[str(i)] + [g[k] for k in keys] for i, g in enumerate(levels)]
+    rows = [[str(first + i)] + [g[k] for k in keys] for i, g in enumerate(levels)]
     if levels:
         s = lambda k: sum(float(g[k]) for g in levels)
         rows.append(["all", "", "", "", f"{s('newton_its'):g}", f"{s('substeps'):g}", f"{s('pseudo_time_steps'):g}",
@@ -140,6 +151,9 @@ def main():
     ap.add_argument("--mpiexec", default="mpirun")
     ap.add_argument("--mpiexec-args", default="--oversubscribe", help="options of mpiexec before the executable")
     ap.add_argument("--extra", default="", help="extra options for compact")
+    ap.add_argument("--restart", metavar="CHECKPOINT", help="continue every run from this compact checkpoint"
+                    " (-restart): only the levels after the checkpoint's are run and reported, all rank counts"
+                    " start from the same state")
     ap.add_argument("--merge", nargs="+", metavar="CSV", help="run nothing: merge CSVs of earlier runs of this script"
                     " (e.g. 1 rank and 2 ranks measured separately), recompute the efficiencies, write --csv and --png")
     args = ap.parse_args()
@@ -158,6 +172,10 @@ def main():
     common = ["-kappa", str(args.kappa), "-friction", str(args.friction), "-pressures", pressures,
               "-mesh_triangles", str(args.mesh_triangles), "-seed", str(args.seed), "-write_hdf5", "false",
               "-memory_view"] + shlex.split(args.extra)
+    restored = 0
+    if args.restart:
+        restored = checkpoint_levels(args.restart)
+        common += ["-restart", os.path.abspath(args.restart)]
     modes = [("strong", lambda r: args.n_particles)] + ([("weak", lambda r: args.weak_per_rank * r)]
                                                         if args.weak_per_rank > 0 else [])
     rows = []
@@ -174,14 +192,14 @@ def main():
                         "-n_particles", str(n)] + common + (["-options_file", opts] if opts else [])
                        + ["-output_dir", run_dir])
                 status, wall, levels, (mem_max, mem_tot) = run_compact(cmd, run_dir, args.timeout, env)
-                lrows = level_rows(levels) or [[""] * 10]
+                lrows = level_rows(levels[restored:], restored) or [[""] * 10]
                 for lr in lrows:
                     sec = float(lr[9]) if lr[9] else None
                     its = float(lr[4]) if lr[4] else 0
                     spn = sec / its if sec is not None and its > 0 else None
                     eff = effn = None
                     # 'all' is comparable only between runs that finished the same levels
-                    key = lr[0] if lr[0] != "all" else f"all{len(levels)}"
+                    key = lr[0] if lr[0] != "all" else f"all{len(levels) - restored}"
                     if sec is not None and r == ranks[0]:
                         ref[key] = (r, sec, spn)
                     if sec and key in ref:

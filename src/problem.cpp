@@ -80,6 +80,10 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "pseudo-transient continuation: after a failed inner solve, use the Fischer-Burmeister NCP "
                              "function for the rest of the sub-step",
                              "", ptc_retry_fb, &ptc_retry_fb, nullptr));
+  PetscCall(PetscOptionsReal("-progress_interval",
+                             "seconds between progress lines (pressure, pseudo-time step, Newton iterations, residual, "
+                             "phi) while a sub-step runs long; 0: after every pseudo-time step, negative: none",
+                             "", progress_interval, &progress_interval, nullptr));
   PetscCall(PetscOptionsReal("-contact_margin", "contact candidates: gap below margin x mean diameter", "",
                              contact_margin, &contact_margin, nullptr));
   PetscCall(PetscOptionsEList("-contact_deformable",
@@ -1316,6 +1320,9 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   const int max_outer = static_cast<int>(params_.ptc_max_steps);
   int failures = 0;  // failed inner solves in a row
   double phi_last = -1.0;
+  PetscLogDouble t_start, t_progress;
+  PetscCall(PetscTime(&t_start));
+  t_progress = t_start;
   double force_residual = 0.0;
   if (ptc) {
     if (!snes_) PetscCall(SetUpLayout());
@@ -1445,6 +1452,23 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
                             outer, (double)true_norm, std::sqrt(part[0]), std::sqrt(part[1]), std::sqrt(part[2]),
                             std::sqrt(part[3]), std::sqrt(part[4]), force_residual, phi, move, its,
                             stale ? "  (candidates refreshed)" : ""));
+    }
+    if (params_.progress_interval >= 0.0 && !monitor_outer_) {
+      // A heartbeat for long sub-steps (thousands of Newton iterations at 1500 disks): rank 0's clock decides, so
+      // the ranks agree on whether to print.
+      PetscLogDouble now;
+      PetscCall(PetscTime(&now));
+      int due = now - t_progress >= params_.progress_interval;
+      PetscCallMPI(MPI_Bcast(&due, 1, MPI_INT, 0, comm_));
+      if (due) {
+        t_progress = now;
+        PetscCall(PetscPrintf(comm_,
+                              "    ... P/E %.4g: pseudo-time step %d, %" PetscInt_FMT " Newton its, |F|_inf %.2e P<d>"
+                              " (level criterion %.0e), phi %.6f, %.0f s in this sub-step\n",
+                              pressure / params_.young, outer + 1, report->newton_its,
+                              force_residual / (std::max(pressure, 1e-300) * mean_diameter_), params_.level_force_rtol, phi,
+                              now - t_start));
+      }
     }
     report->force_residual = force_residual;
     const bool settled = !stale && active_now_ == active_inner;

@@ -20,6 +20,11 @@ Cases
                     later levels of levels.h5; bad checkpoints and options that do
                     not fit the checkpoint are refused with a clear message and
                     leave the existing results byte-identical
+  progress          12 disks: with -progress_interval 0 a progress line follows every
+                    pseudo-time step, on 1 and on 2 ranks (printed once); the last
+                    line of each sub-step counts its Newton iterations, and per
+                    level they add up to curve.csv's newton_its; with
+                    -progress_interval -1 there are none
 
 Every row of curve.csv must satisfy: all requested levels present, phi rising
 with P, no penetration beyond 1e-9 <d>, the unbalanced force within the level
@@ -31,6 +36,7 @@ import argparse
 import csv
 import filecmp
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -192,12 +198,51 @@ def restart_case(driver, workdir, mpiexec):
               f"existing results byte-identical (changed: {mismatch + errors})")
 
 
+PROGRESS_RE = re.compile(r"^    \.\.\. P/E (\S+): pseudo-time step (\d+), (\d+) Newton its, \|F\|_inf (\S+) P<d>")
+
+
+def progress_case(driver, workdir, mpiexec):
+    levels = [1e-4, 1e-3, 3e-3]
+    for ranks in (1, 2):
+        out = os.path.join(workdir, f"ranks-{ranks}")
+        shutil.rmtree(out, ignore_errors=True)
+        launcher = [] if ranks == 1 else [mpiexec, "-n", "2", "--oversubscribe"]
+        rc, text = compact(driver, out, levels, launcher, ["-progress_interval", "0", "-write_hdf5", "false"])
+        if not check(rc == 0, f"{ranks} rank(s): exit code {rc}"):
+            continue
+        rows = read_curve(out)
+        # Progress lines of the levels (the rigid settling's come before the table header).
+        body = text.split(" P/E      phi", 1)[-1].splitlines()
+        lines = [(float(m[1]), int(m[2]), int(m[3])) for m in map(PROGRESS_RE.match, body) if m]
+        check(len(lines) >= len(levels), f"{ranks} rank(s): {len(lines)} progress lines")
+        # Sub-steps: a line whose pressure differs from, or whose pseudo-time step does not follow, the last one's.
+        substeps = []
+        for p, step, its in lines:
+            if substeps and substeps[-1][0] == p and step > substeps[-1][1]:
+                substeps[-1] = (p, step, its)
+            else:
+                substeps.append((p, step, its))
+        for r in rows:
+            target, its = float(r["P_over_E"]), 0
+            while substeps and substeps[0][0] <= target * (1 + 1e-3):  # this level's sub-steps (and re-solves at P)
+                its += substeps.pop(0)[2]
+            if float(r["cuts"]) == 0:
+                check(its == int(float(r["newton_its"])),
+                      f"{ranks} rank(s), P/E = {target:g}: progress lines count {its} Newton iterations, curve.csv"
+                      f" {r['newton_its']}")
+        check(not substeps, f"{ranks} rank(s): no progress lines beyond the last level ({substeps})")
+    out = os.path.join(workdir, "quiet")
+    shutil.rmtree(out, ignore_errors=True)
+    rc, text = compact(driver, out, levels[:1], extra=["-progress_interval", "-1", "-write_hdf5", "false"])
+    check(rc == 0 and not any(map(PROGRESS_RE.match, text.splitlines())), "-progress_interval -1: no progress lines")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--driver", required=True)
     ap.add_argument("--workdir", required=True)
     ap.add_argument("--mpiexec", default="mpirun")
-    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart"])
+    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart", "progress"])
     a = ap.parse_args()
     os.makedirs(a.workdir, exist_ok=True)
     if a.case == "friction-to-half":
@@ -225,6 +270,8 @@ def main():
                       f"{tag}: Z_nr {rn['Z_no_rattlers']:.4f} vs serial {r1['Z_no_rattlers']:.4f} (within one contact)")
     elif a.case == "restart":
         restart_case(a.driver, a.workdir, a.mpiexec)
+    elif a.case == "progress":
+        progress_case(a.driver, a.workdir, a.mpiexec)
     else:
         rows = run_compact(a.driver, os.path.join(a.workdir, "jump"), [0.1], timeout=900)
         ref = run_compact(a.driver, os.path.join(a.workdir, "stepped"), [1e-4, 1e-3, 0.01, 0.05, 0.1], timeout=900)

@@ -133,6 +133,7 @@ struct ProblemParameters {
   PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path
   double repartition_tol = 0.1;  // repartition when the new edge cut is smaller by this fraction or the imbalance exceeds 1 + this (< 0: never)
   PetscBool partition_view = PETSC_FALSE;     // print edge cut and imbalance of every (re)partition
+  double progress_interval = 60.0;  // seconds between progress lines within a long sub-step (0: every pseudo-time step, < 0: none)
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
 
