@@ -427,6 +427,7 @@ class CompactionProblem {
   SNES snes_ = nullptr;
   std::vector<char> active_now_, active_checked_;
   std::vector<double> switch_margin_;  // per candidate: |lambda_n - c_n g| and ||trial| - mu a| (own contacts; see ConvergenceTest)
+  std::vector<double> gap_bound_;      // per candidate, at the last residual: gap and sum_a |dgap_a| (own contacts; see LimitStep)
   std::vector<std::uint64_t> active_history_;  // hashes of the contact states of the last Newton iterates (LimitStep)
   bool inverted_ = false;
   double fnorm0_ = 0.0;
