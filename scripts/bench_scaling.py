@@ -236,7 +236,8 @@ def main():
         w.writerows(rows)
     print("wrote", args.csv)
     plot(rows, args.png, f"compact N={args.n_particles} kappa={args.kappa:g} mu={args.friction:g} P/E={pressures}"
-                         f"{f', weak {args.weak_per_rank}/rank' if args.weak_per_rank > 0 else ''}")
+                         f"{f', weak {args.weak_per_rank}/rank' if args.weak_per_rank > 0 else ''}"
+                         f"{f', restarted after level {restored - 1}' if restored else ''}")
 
 
 def merge(paths, out_csv, out_png):
