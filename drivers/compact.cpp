@@ -114,7 +114,7 @@ const std::vector<std::string> kCurveColumns = {
     "P_sigma_over_E", "K_over_E", "mean_volumetric_strain", "contacts", "sliding_contacts", "newton_its", "substeps",
     "cuts", "seconds", "max_penetration", "pseudo_time_steps", "symbolic_factorizations", "unknowns",
     "rigid_unknowns", "deformable_unknowns", "tangential_unknowns", "candidates", "jacobian_nonzeros",
-    "force_residual_over_Pd", "relaxed_substeps", "gauge_torque_over_Pd2"};
+    "force_residual_over_Pd", "relaxed_substeps", "gauge_torque_over_Pd2", "factorizations"};
 
 PetscErrorCode Run(MPI_Comm comm) {
   CompactOptions opts;
@@ -305,13 +305,14 @@ PetscErrorCode Run(MPI_Comm comm) {
       PetscCall(AdvanceToPressure(problem, load, P_settle, &step, &rep));
       problem.SetFrictionActive(true);
       SolveReport again;
-      PetscCall(problem.Solve(P_settle, &again));
+      PetscCall(SolveLevel(problem, load.level, P_settle, &again));
       PetscCheck(again.converged, comm, PETSC_ERR_NOT_CONVERGED,
                  "P/E = %g: the frictionless settled state did not converge once friction was switched on (%s); "
                  "try -settle_frictionless false", P_settle / params.young, SNESConvergedReasons[again.reason]);
       LevelReport rest;
       PetscCall(AdvanceToPressure(problem, load, P, &step, &rest));
       rep.newton_its += again.newton_its + rest.newton_its;
+      rep.factorizations += again.factorizations + rest.factorizations;
       rep.inner_solves += again.inner_solves + rest.inner_solves;
       rep.layouts += again.layouts + rest.layouts;
       rep.substeps += rest.substeps;
@@ -354,7 +355,8 @@ PetscErrorCode Run(MPI_Comm comm) {
                          double(sizes.rigid), double(sizes.deformable), double(sizes.tangential),
                          double(sizes.normal), double(sizes.jacobian_nonzeros),
                          rep.force_residual / (P * problem.MeanDiameter()), double(rep.relaxed_substeps),
-                         problem.Summary().max_gauge_torque / (P * problem.MeanDiameter() * problem.MeanDiameter())});
+                         problem.Summary().max_gauge_torque / (P * problem.MeanDiameter() * problem.MeanDiameter()),
+                         double(rep.factorizations)});
     PetscCall(curve.Row(rows.back()));
     if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
     if (opts.checkpoint) {

@@ -16,6 +16,7 @@ PetscErrorCode LoadControlParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsBool("-load_monitor", "print one line per sub-step (pressure, Newton iterations, pseudo-time steps)",
                              "", monitor, &monitor, nullptr));
   PetscOptionsEnd();
+  PetscCall(level.SetFromOptions(comm));
   PetscCheck(max_cuts >= 0, comm, PETSC_ERR_USER_INPUT, "-load_max_cuts must be >= 0");
   PetscCheck(growth >= 1.0, comm, PETSC_ERR_USER_INPUT, "-load_growth %g must be >= 1", growth);
   PetscFunctionReturn(0);
@@ -40,8 +41,9 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
     const double inc = (remaining - dP <= snap) ? remaining : dP;
     const double Pnext = P + std::copysign(inc, target - P);
     SolveReport solve;
-    PetscCall(problem.Solve(Pnext, &solve));
+    PetscCall(SolveLevel(problem, params.level, Pnext, &solve));
     report->newton_its += solve.newton_its;
+    report->factorizations += solve.factorizations;
     report->inner_solves += solve.inner_solves;
     report->layouts += solve.layouts;
     if (params.monitor)

@@ -937,52 +937,12 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
   }
   const double cap = p->params_.newton_max_move * p->mean_diameter_;
   if (cap <= 0.0) PetscFunctionReturn(0);
-  // Contacts open now that the linearized step would drive deep into
-  // penetration (an overshoot of the Newton model, which has them open):
-  // shorten the step so that they just touch, but never below 1/10.
-  // Only a contact with gap + allow < sum_a |dgap_a| |Y_a| can do so; the
-  // residual at this iterate left gap and sum_a |dgap_a| in gap_bound_, so
-  // the others are skipped without evaluating their geometry (which costs as
-  // much as a residual at 1500 disks). The skip is exact: the step is the same.
   {
-    double ymax = 0.0;  // largest body or wall component of the step
-    PetscCall(VecGetOwnershipRange(Y, &lo, &hi));
-    PetscCall(VecGetArrayRead(Y, &ya));
-    for (PetscInt i = lo; i < hi; ++i)
-      if (p->natural_of_[i] < p->GaugeOffset()) ymax = std::max(ymax, std::abs(ya[i - lo]));
-    PetscCall(VecRestoreArrayRead(Y, &ya));
-    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &ymax, 1, MPI_DOUBLE, MPI_MAX, p->comm_));
-    const bool bounds = p->gap_bound_.size() == 2 * p->candidates_.size();
-    Vec yall = p->yall_;
-    const PetscScalar *xa, *yv;
-    PetscCall(VecScatterBegin(p->to_local_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecScatterEnd(p->to_local_, Y, yall, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecGetArrayRead(p->zall_, &xa));  // the current iterate (gathered by the last residual)
-    PetscCall(VecGetArrayRead(yall, &yv));
-    const double allow = 1e-3 * p->mean_diameter_;
-    double alpha = 1.0;
-    for (size_t ci = 0; ci < p->candidates_.size(); ++ci) {
-      const ContactCandidate &c = p->candidates_[ci];
-      if (p->CandidateOwner(c) != p->rank_) continue;
-      if (bounds && (p->gap_bound_[2 * ci] <= 0.0 ||
-                     p->gap_bound_[2 * ci] + allow > (1.0 + 1e-8) * p->gap_bound_[2 * ci + 1] * ymax))
-        continue;
-      CompactionProblem::LocalContact lc;
-      p->ContactGeometry(c, xa, &lc);
-      if (lc.k.gap <= 0.0) continue;
-      double dg = 0.0;
-      for (int a = 0; a < lc.k.ndof; ++a)
-        if (lc.dofs[a] >= 0) dg -= lc.k.dgap[a] * yv[lc.dofs[a]];
-      if (lc.k.gap + dg < -allow) alpha = std::min(alpha, (lc.k.gap + allow) / -dg);
-    }
-    PetscCall(VecRestoreArrayRead(yall, &yv));
-    PetscCall(VecRestoreArrayRead(p->zall_, &xa));
-    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &alpha, 1, MPI_DOUBLE, MPI_MIN, p->comm_));
-    alpha = std::max(alpha, 0.1);
-    if (alpha < 1.0) {
-      PetscCall(VecScale(Y, alpha));
-      *changed = PETSC_TRUE;
-    }
+    double alpha;
+    PetscCall(VecScale(Y, -1.0));  // the update is -Y
+    PetscCall(p->ContactStepFraction(Y, &alpha));
+    PetscCall(VecScale(Y, -alpha));
+    *changed = alpha < 1.0 ? PETSC_TRUE : PETSC_FALSE;
   }
   PetscCall(VecGetOwnershipRange(Y, &lo, &hi));
   PetscCall(VecGetArrayRead(Y, &ya));
@@ -996,6 +956,56 @@ PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *c
   if (m > cap) {
     PetscCall(VecScale(Y, cap / m));
     *changed = PETSC_TRUE;
+  }
+  PetscFunctionReturn(0);
+}
+
+// Contacts open at the current iterate that the linearized update dz would
+// drive deep into penetration (an overshoot of the Newton model, which has
+// them open): the fraction of dz after which they just touch, never below
+// 1/10. Only a contact with gap + allow < sum_a |dgap_a| |dz_a| can do so; the
+// last residual left gap and sum_a |dgap_a| in gap_bound_, so the others are
+// skipped without evaluating their geometry (which costs as much as a
+// residual at 1500 disks). The skip is exact. Collective.
+PetscErrorCode CompactionProblem::ContactStepFraction(Vec dz, double *fraction) {
+  const PetscScalar *ya;
+  PetscInt lo, hi;
+  PetscFunctionBeginUser;
+  {
+    double ymax = 0.0;  // largest body or wall component of the step
+    PetscCall(VecGetOwnershipRange(dz, &lo, &hi));
+    PetscCall(VecGetArrayRead(dz, &ya));
+    for (PetscInt i = lo; i < hi; ++i)
+      if (natural_of_[i] < GaugeOffset()) ymax = std::max(ymax, std::abs(ya[i - lo]));
+    PetscCall(VecRestoreArrayRead(dz, &ya));
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &ymax, 1, MPI_DOUBLE, MPI_MAX, comm_));
+    const bool bounds = gap_bound_.size() == 2 * candidates_.size();
+    Vec yall = yall_;
+    const PetscScalar *xa, *yv;
+    PetscCall(VecScatterBegin(to_local_, dz, yall, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(to_local_, dz, yall, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecGetArrayRead(zall_, &xa));  // the current iterate (gathered by the last residual)
+    PetscCall(VecGetArrayRead(yall, &yv));
+    const double allow = 1e-3 * mean_diameter_;
+    double alpha = 1.0;
+    for (size_t ci = 0; ci < candidates_.size(); ++ci) {
+      const ContactCandidate &c = candidates_[ci];
+      if (CandidateOwner(c) != rank_) continue;
+      if (bounds && (gap_bound_[2 * ci] <= 0.0 ||
+                     gap_bound_[2 * ci] + allow > (1.0 + 1e-8) * gap_bound_[2 * ci + 1] * ymax))
+        continue;
+      CompactionProblem::LocalContact lc;
+      ContactGeometry(c, xa, &lc);
+      if (lc.k.gap <= 0.0) continue;
+      double dg = 0.0;
+      for (int a = 0; a < lc.k.ndof; ++a)
+        if (lc.dofs[a] >= 0) dg += lc.k.dgap[a] * yv[lc.dofs[a]];
+      if (lc.k.gap + dg < -allow) alpha = std::min(alpha, (lc.k.gap + allow) / -dg);
+    }
+    PetscCall(VecRestoreArrayRead(yall, &yv));
+    PetscCall(VecRestoreArrayRead(zall_, &xa));
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &alpha, 1, MPI_DOUBLE, MPI_MIN, comm_));
+    *fraction = std::max(alpha, 0.1);
   }
   PetscFunctionReturn(0);
 }
@@ -1252,6 +1262,155 @@ PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force) const {
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode CompactionProblem::Layout(Vec *z, Vec *F, Mat *J, KSP *ksp) {
+  PetscFunctionBeginUser;
+  if (!snes_) PetscCall(SetUpLayout());
+  PetscCall(PackState(z_));
+  *z = z_, *F = r_, *J = J_;
+  PetscCall(SNESGetKSP(snes_, ksp));
+  PetscFunctionReturn(0);
+}
+
+bool CompactionProblem::GrowFactorWorkspace() {
+  if (mumps_extra_ >= 6400) return false;
+  mumps_extra_ *= 2;
+  DestroySolver();
+  return true;
+}
+
+PetscErrorCode CompactionProblem::NewtonMatrix(Vec z, Mat J) {
+  PetscFunctionBeginUser;
+  PetscCall(FormJacobian(nullptr, z, J, J, this));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::ShiftDiagonals(Vec floor, Vec weight) const {
+  PetscScalar *fa, *wa;
+  PetscFunctionBeginUser;
+  PetscCall(VecGetArray(floor, &fa));
+  PetscCall(VecGetArray(weight, &wa));
+  for (PetscInt i = own_lo_; i < own_hi_; ++i) {
+    const PetscInt n = natural_of_[i];
+    fa[i - own_lo_] = ProximalDiagonal(n);
+    wa[i - own_lo_] = n < GaugeOffset() ? prox_weight_[n] : 0.0;
+  }
+  PetscCall(VecRestoreArray(floor, &fa));
+  PetscCall(VecRestoreArray(weight, &wa));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::AdoptState(Vec z) {
+  const PetscScalar *za;
+  PetscFunctionBeginUser;
+  PetscCall(Gather(z, true));
+  PetscCall(VecGetArrayRead(zall_, &za));
+  Unpack(za);
+  PetscCall(VecRestoreArrayRead(zall_, &za));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::RotatedUpdate(Vec zv, Vec dv, Vec ztv) const {
+  const PetscScalar *z, *d;
+  PetscScalar *zt;
+  PetscFunctionBeginUser;
+  PetscCall(VecWAXPY(ztv, 1.0, dv, zv));
+  PetscCall(VecGetArrayRead(zv, &z));
+  PetscCall(VecGetArrayRead(dv, &d));
+  PetscCall(VecGetArray(ztv, &zt));
+  for (const DeformableBody &body : bodies_) {
+    if (ParticleOwner(body.particle) != rank_) continue;
+    const int nn = body.mesh.num_nodes();
+    // Local (owned) index of node a's x unknown; a body's unknowns are contiguous in both numberings.
+    const PetscInt first = petsc_of_[body.dof_offset] - own_lo_;
+    double c[2] = {0, 0}, t[2] = {0, 0};
+    for (int a = 0; a < nn; ++a)
+      for (int i = 0; i < 2; ++i) {
+        c[i] += (body.mesh.X[2 * a + i] + z[first + 2 * a + i]) / nn;
+        t[i] += d[first + 2 * a + i] / nn;
+      }
+    double num = 0.0, den = 0.0;
+    for (int a = 0; a < nn; ++a) {
+      const double r[2] = {body.mesh.X[2 * a] + z[first + 2 * a] - c[0], body.mesh.X[2 * a + 1] + z[first + 2 * a + 1] - c[1]};
+      num += r[0] * (d[first + 2 * a + 1] - t[1]) - r[1] * (d[first + 2 * a] - t[0]);
+      den += r[0] * r[0] + r[1] * r[1];
+    }
+    const double theta = den > 0.0 ? num / den : 0.0;
+    const double cm1 = std::cos(theta) - 1.0, smt = std::sin(theta) - theta;
+    for (int a = 0; a < nn; ++a) {
+      const double r[2] = {body.mesh.X[2 * a] + z[first + 2 * a] - c[0], body.mesh.X[2 * a + 1] + z[first + 2 * a + 1] - c[1]};
+      zt[first + 2 * a] += cm1 * r[0] - smt * r[1];
+      zt[first + 2 * a + 1] += smt * r[0] + cm1 * r[1];
+    }
+  }
+  PetscCall(VecRestoreArray(ztv, &zt));
+  PetscCall(VecRestoreArrayRead(dv, &d));
+  PetscCall(VecRestoreArrayRead(zv, &z));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::Merit(Vec zv, double penalty, const std::vector<double> &lagged, double *value) {
+  const PetscScalar *z;
+  PetscFunctionBeginUser;
+  PetscCall(Gather(zv, false));
+  PetscCall(VecGetArrayRead(zall_, &z));
+  double sum = 0.0;
+  std::vector<double> Xe, xe;
+  for (const DeformableBody &body : bodies_) {
+    if (ParticleOwner(body.particle) != rank_) continue;
+    const DiskMesh &m = body.mesh;
+    const int nen = m.nodes_per_cell();
+    Xe.resize(2 * nen), xe.resize(2 * nen);
+    for (int e = 0; e < m.num_cells(); ++e) {
+      for (int a = 0; a < nen; ++a) {
+        const int n = m.cells[e * nen + a];
+        for (int i = 0; i < 2; ++i) {
+          Xe[2 * a + i] = m.X[2 * n + i];
+          xe[2 * a + i] = m.X[2 * n + i] + z[body.dof_offset + 2 * n + i];
+        }
+      }
+      const ElementResult r = triangle_element(material_, m.order, Xe.data(), xe.data(), nullptr, nullptr);
+      sum += r.inverted ? INFINITY : r.energy;
+    }
+  }
+  if (rank_ == 0) sum += pressure_ * WallBox::area(z + WallOffset());
+  const double mu = friction_on_ ? params_.friction : 0.0;
+  LocalContact lc;
+  for (size_t c = 0; c < candidates_.size(); ++c) {
+    if (CandidateOwner(candidates_[c]) != rank_) continue;
+    ContactGeometry(candidates_[c], z, &lc);
+    sum += penalty * std::max(0.0, -lc.k.gap);
+    if (tangential_index_[c] >= 0 && c < lagged.size()) sum += mu * std::max(0.0, lagged[c]) * std::abs(lc.k.slip);
+  }
+  PetscCall(VecRestoreArrayRead(zall_, &z));
+  PetscCallMPI(MPI_Allreduce(&sum, value, 1, MPI_DOUBLE, MPI_SUM, comm_));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::ResidualBlocks(Vec F, double norm[5]) const {
+  const PetscScalar *ra;
+  PetscFunctionBeginUser;
+  std::fill(norm, norm + 5, 0.0);
+  PetscCall(VecGetArrayRead(F, &ra));
+  for (PetscInt i = own_lo_; i < own_hi_; ++i) {
+    const PetscInt n = natural_of_[i];
+    const int k = n < WallOffset() ? 0 : n < GaugeOffset() ? 1 : n < MultiplierOffset() ? 2 : n < TangentialOffset() ? 3 : 4;
+    norm[k] += ra[i - own_lo_] * ra[i - own_lo_];
+  }
+  PetscCall(VecRestoreArrayRead(F, &ra));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, norm, 5, MPI_DOUBLE, MPI_SUM, comm_));
+  for (int k = 0; k < 5; ++k) norm[k] = std::sqrt(norm[k]);
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::ChangedStateMargin(const std::vector<char> &was, double *margin) const {
+  PetscFunctionBeginUser;
+  *margin = 0.0;
+  if (was == active_now_) PetscFunctionReturn(0);
+  *margin = was.size() == active_now_.size() ? changed_state_margin(was, active_now_, switch_margin_) : INFINITY;
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, margin, 1, MPI_DOUBLE, MPI_MAX, comm_));
+  PetscFunctionReturn(0);
+}
+
 LayoutSizes CompactionProblem::Sizes() {
   LayoutSizes s;
   if (!snes_ && SetUpLayout() != 0) return s;
@@ -1287,13 +1446,37 @@ PetscErrorCode CompactionProblem::EvaluateJacobian(Vec z, Mat *J) {
 }
 
 // ---------------------------------------------------------------------------
-PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
+// A point that was not a candidate may have crossed another body or a wall
+// during a solve, or a node may have slid out of its segment window: then the
+// candidates must be updated and the solve continued. A node-segment pair is
+// stale only when its closest point has left the pair's two-segment window
+// (inside it the gap is continuous). Reads the replicated state.
+PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
   PetscFunctionBeginUser;
-  *report = SolveReport();
-  const int layouts_before = layouts_created_;
+  const double pen_tol = 1e-9 * mean_diameter_;
+  std::set<std::tuple<int, int, int, int, int>> current;
+  for (const ContactCandidate &c : candidates_) current.insert(CandidateKey(c));
+  *stale = false;
+  for (const ContactCandidate &c : DetectCandidates(-pen_tol / mean_diameter_))
+    if (!current.count(CandidateKey(c))) *stale = true;
+  std::vector<double> zfull(n_total_);
+  Pack(zfull.data());
+  for (const ContactCandidate &c : candidates_) {
+    if (*stale || c.type != ContactType::NodeSegment) continue;
+    LocalContact lc;
+    ContactGeometry(c, zfull.data(), &lc);
+    if (lc.beyond != 0 && lc.k.gap < params_.contact_margin * mean_diameter_) *stale = true;
+  }
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
+  PetscFunctionBeginUser;
+  layouts_at_step_ = layouts_created_;
   ncp_now_ = params_.ncp;
-  const State saved = SaveState();
-  const double saved_pressure = pressure_;
+  step_saved_ = SaveState();
+  step_saved_pressure_ = pressure_;
+  const State &saved = step_saved_;
   u_start_ = u_;
   // Secant predictor along the load path: extrapolate the bodies and walls
   // from the last two converged states (none for the first two increments:
@@ -1326,6 +1509,33 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   }
   pressure_ = pressure;
   PetscCall(RefreshCandidates());
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::EndLoadStep(bool converged, SolveReport *report) {
+  PetscFunctionBeginUser;
+  rho_anchor_ = 0.0;
+  ncp_now_ = params_.ncp;
+  if (!converged) {
+    RestoreState(step_saved_);
+    pressure_ = step_saved_pressure_;
+    u_start_ = u_;
+    PetscFunctionReturn(0);
+  }
+  report->converged = true;
+  report->layouts = layouts_created_ - layouts_at_step_;
+  report->active_contacts = 0;
+  for (char a : active_now_) report->active_contacts += a != kOpen;
+  previous_ = step_saved_;
+  previous_pressure_ = step_saved_pressure_;
+  have_previous_ = true;
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
+  PetscFunctionBeginUser;
+  *report = SolveReport();
+  PetscCall(BeginLoadStep(pressure));
   // Pseudo-transient continuation (-ptc_move > 0). The equations get the term
   // rho_a D (z - z_a), z_a the state at the start of the inner solve: each
   // SNES solve is an implicit step of an overdamped dynamics in which
@@ -1338,7 +1548,6 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
   // is divided by 4 after a failed one. The level is converged when the
   // residual WITHOUT the term is below tolerance with a stable contact state,
   // so the regularization has vanished at the accepted equilibrium.
-  const double pen_tol = 1e-9 * mean_diameter_;
   const double rho_floor = params_.prox_eta * params_.young;
   const bool ptc = params_.ptc_move > 0.0;
   double move = params_.ptc_move;
@@ -1408,11 +1617,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
         if (params_.ptc_retry_fb) ncp_now_ = NcpFunction::FischerBurmeister;
         continue;
       }
-      rho_anchor_ = 0.0;
-      RestoreState(saved);
-      ncp_now_ = params_.ncp;
-      pressure_ = saved_pressure;
-      u_start_ = u_;
+      PetscCall(EndLoadStep(false, report));
       PetscFunctionReturn(0);
     }
     PetscCall(Gather(z_, true));
@@ -1420,24 +1625,8 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     PetscCall(VecGetArrayRead(zall_, &za));
     Unpack(za);
     PetscCall(VecRestoreArrayRead(zall_, &za));
-    // A point that was not a candidate may have crossed another body or a
-    // wall during the solve, or a node may have slid out of its segment
-    // window: update the candidates and solve again.
-    // A node-segment pair is stale only when its closest point has left the
-    // pair's two-segment window (inside it the gap is continuous).
-    std::set<std::tuple<int, int, int, int, int>> current;
-    for (const ContactCandidate &c : candidates_) current.insert(CandidateKey(c));
     bool stale = false;
-    for (const ContactCandidate &c : DetectCandidates(-pen_tol / mean_diameter_))
-      if (!current.count(CandidateKey(c))) stale = true;
-    std::vector<double> zfull(n_total_);
-    Pack(zfull.data());
-    for (const ContactCandidate &c : candidates_) {
-      if (stale || c.type != ContactType::NodeSegment) continue;
-      LocalContact lc;
-      ContactGeometry(c, zfull.data(), &lc);
-      if (lc.beyond != 0 && lc.k.gap < params_.contact_margin * mean_diameter_) stale = true;
-    }
+    PetscCall(CandidatesStale(&stale));
     if (stale && (ptc || refresh < 5)) {
       PetscCall(RefreshCandidates());
       ++report->candidate_refreshes;
@@ -1456,26 +1645,13 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     PetscCall(ForceResidual(r_, &force_residual));
     report->residual = true_norm;
     // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
-    double part[5] = {0, 0, 0, 0, 0};
-    {
-      const PetscScalar *ra;
-      PetscInt lo, hi;
-      PetscCall(VecGetOwnershipRange(r_, &lo, &hi));
-      PetscCall(VecGetArrayRead(r_, &ra));
-      for (PetscInt i = lo; i < hi; ++i) {
-        const PetscInt n = natural_of_[i];
-        const int k = n < WallOffset() ? 0 : n < GaugeOffset() ? 1 : n < MultiplierOffset() ? 2 : n < TangentialOffset() ? 3 : 4;
-        part[k] += ra[i - lo] * ra[i - lo];
-      }
-      PetscCall(VecRestoreArrayRead(r_, &ra));
-      PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, part, 5, MPI_DOUBLE, MPI_SUM, comm_));
-    }
+    double part[5];
+    PetscCall(ResidualBlocks(r_, part));
     const double phi = Summary().packing_fraction;
     if (monitor_outer_) {
       PetscCall(PetscPrintf(comm_,
                             "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)  |F|_inf %.3e  phi %.7f  move %.2e  its %" PetscInt_FMT "%s\n",
-                            outer, (double)true_norm, std::sqrt(part[0]), std::sqrt(part[1]), std::sqrt(part[2]),
-                            std::sqrt(part[3]), std::sqrt(part[4]), force_residual, phi, move, its,
+                            outer, (double)true_norm, part[0], part[1], part[2], part[3], part[4], force_residual, phi, move, its,
                             stale ? "  (candidates refreshed)" : ""));
     }
     if (params_.progress_interval >= 0.0 && !monitor_outer_) {
@@ -1501,7 +1677,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     // The paper's level criterion: unbalanced forces small compared with the
     // contact forces (P <d>), the packing fraction no longer changing, and
     // the contact conditions (Signorini, Coulomb) still satisfied exactly.
-    const double ncp_norm = std::sqrt(part[3] + part[4]);  // part[] holds squared norms
+    const double ncp_norm = std::hypot(part[3], part[4]);
     if (settled && params_.level_force_rtol > 0.0 && force_residual <= params_.level_force_rtol * pressure * mean_diameter_ &&
         ncp_norm <= atol && std::abs(phi - phi_last) <= params_.level_phi_rtol * phi) {
       report->relaxed = true;
@@ -1510,23 +1686,13 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     phi_last = phi;
     if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step
       report->reason = SNES_DIVERGED_MAX_IT;
-      RestoreState(saved);
-      ncp_now_ = params_.ncp;
-      pressure_ = saved_pressure;
-      u_start_ = u_;
+      PetscCall(EndLoadStep(false, report));
       PetscFunctionReturn(0);
     }
     failures = 0;
     if (its <= params_.ptc_easy_its) move = std::min(2.0 * move, 1.0);
   }
-  rho_anchor_ = 0.0;
-  ncp_now_ = params_.ncp;
-  report->converged = true;
-  report->layouts = layouts_created_ - layouts_before;
-  for (char a : active_now_) report->active_contacts += a != kOpen;
-  previous_ = saved;
-  previous_pressure_ = saved_pressure;
-  have_previous_ = true;
+  PetscCall(EndLoadStep(true, report));
   PetscFunctionReturn(0);
 }
 

@@ -8,6 +8,7 @@
 // Newton iterations lets the next one grow. The suggested step is carried
 // from level to level.
 #pragma once
+#include "deformix/level_solver.hpp"
 #include "deformix/problem.hpp"
 
 namespace deformix {
@@ -17,6 +18,7 @@ struct LoadControlParameters {
   PetscInt easy_its = 8;     // grow the step after a sub-step that took at most this many Newton iterations (per inner solve)
   double growth = 2.0;       // step growth factor
   PetscBool monitor = PETSC_FALSE;  // one line per sub-step (-load_monitor)
+  LevelSolverParameters level;      // how each sub-step is solved (-level_*)
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
 
@@ -29,6 +31,7 @@ struct LevelReport {
   double force_residual = 0.0;  // largest unbalanced force at the level's final state
   int relaxed_substeps = 0;     // sub-steps accepted by the relative criterion (-level_force_rtol)
   int layouts = 0;           // new sparsity patterns (symbolic factorizations) in accepted sub-steps
+  PetscInt factorizations = 0;  // numeric factorizations, failed sub-steps included
   double seconds = 0.0;
   bool converged = false;
 };

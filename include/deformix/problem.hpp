@@ -208,6 +208,7 @@ struct SolveReport {
   double force_residual = 0.0;  // largest unbalanced force at the accepted state (PTC only)
   bool relaxed = false;         // accepted by the paper's criterion (level_force_rtol), not at |R| <= atol
   int layouts = 0;              // new unknown layouts (each one a new sparsity pattern: symbolic factorization)
+  int factorizations = 0;       // numeric factorizations of the Newton matrix
 };
 
 // Sizes of the current unknown layout: what the scene needs and nothing else
@@ -259,9 +260,64 @@ class CompactionProblem {
   // Places the walls (x_left, x_right, y_bottom, y_top).
   void SetWalls(const double w[4]);
 
-  // Solves equilibrium at pressure P starting from the current state. On
-  // success the state is updated; on failure it is left unchanged.
+  // Solves equilibrium at pressure P starting from the current state by
+  // pseudo-transient continuation (-level_solver anchored). On success the
+  // state is updated; on failure it is left unchanged.
   PetscErrorCode Solve(double pressure, SolveReport *report);
+
+  // ---- What a level solver (level_solver.hpp) drives: the operator. ----
+  // Starts a load step to pressure P: saves the state (EndLoadStep(false)
+  // restores it), predicts the new state along the load path, scales the
+  // multipliers with the pressure and refreshes the contact candidates.
+  PetscErrorCode BeginLoadStep(double pressure);
+  // Ends the load step: a converged one becomes the predictor's last state
+  // (report: converged, layouts, active contacts); a failed one is undone.
+  PetscErrorCode EndLoadStep(bool converged, SolveReport *report);
+  // The Vec/Mat objects of the current candidate layout (created when
+  // missing; owned by the problem, replaced when the candidates change).
+  // z holds the state after the call.
+  PetscErrorCode Layout(Vec *z, Vec *F, Mat *J, KSP *ksp);
+  // MUMPS ran out of workspace (INFOG(1) = -9): the next layout reserves
+  // twice as much (the current one is destroyed). False when already at the cap.
+  bool GrowFactorWorkspace();
+  int LayoutsCreated() const { return layouts_created_; }
+  // Residual F(z) (exact NCP rows, no regularization) and the Newton matrix
+  // J(z) + diag(ProximalDiagonal) in J (the matrix of Layout()).
+  PetscErrorCode Residual(Vec z, Vec F) { return EvaluateResidual(z, F); }
+  PetscErrorCode NewtonMatrix(Vec z, Mat J);
+  // Diagonal added by NewtonMatrix (floor) and the weights D of a shift on
+  // the body and wall rows (1, r^2 on rigid rotations, 0 on other rows).
+  PetscErrorCode ShiftDiagonals(Vec floor, Vec weight) const;
+  // z becomes the state of the problem (replicated on every rank).
+  PetscErrorCode AdoptState(Vec z);
+  // True when a non-candidate pair penetrates or a node left its segment
+  // window at the current state: RefreshCandidates, then continue.
+  PetscErrorCode CandidatesStale(bool *stale) const;
+  // Largest fraction (>= 1/10) of the update dz that does not drive an open
+  // contact deep into penetration; needs the residual last evaluated at the iterate.
+  PetscErrorCode ContactStepFraction(Vec dz, double *fraction);
+  // The last residual evaluation met an inverted element.
+  bool Inverted() const { return inverted_; }
+  // Largest unbalanced force of a residual (body and wall rows, torques / radius).
+  PetscErrorCode ForceResidual(Vec F, double *force) const;
+  // The trial state of an update d: zt = z + d, except that the mean rotation
+  // theta of each deformable body's increment (about its centroid) is applied
+  // as a finite rotation R(theta) instead of its linearization I + theta J.
+  // A linearized rotation of a nearly incompressible disk changes its area by
+  // theta^2 and costs lambda theta^2 of pressure, so along the free rotation
+  // of a frictionless disk a Newton step would be valid only for theta <<
+  // sqrt(|F| / lambda); with the rotation applied exactly it is not limited.
+  PetscErrorCode RotatedUpdate(Vec z, Vec d, Vec zt) const;
+  // Merit of the state z for a level solver: the enthalpy sum_b W_b(u) + P area(w),
+  // plus the frictional dissipation mu sum_c lagged_c |s_c(z)| with lagged normal
+  // forces (aligned with the candidates), plus penalty sum_c max(0, -g_c(z)) for
+  // every candidate. Collective; clobbers the gathered iterate (as a residual does).
+  PetscErrorCode Merit(Vec z, double penalty, const std::vector<double> &lagged, double *value);
+  // 2-norms of the blocks of a residual: body, wall, gauge, normal-contact and tangential rows.
+  PetscErrorCode ResidualBlocks(Vec F, double norm[5]) const;
+  // Largest |contact state switch margin| of the contacts whose state differs
+  // between `was` and the last residual evaluation (0: none changed); collective.
+  PetscErrorCode ChangedStateMargin(const std::vector<char> &was, double *margin) const;
 
   // Copy / restore of the state (for step cut-backs).
   struct State {
@@ -323,6 +379,7 @@ class CompactionProblem {
   // the unknowns (the protocol: settle the packing frictionless, then turn
   // friction on).
   void SetFrictionActive(bool on) { friction_on_ = on; }
+  bool FrictionActive() const { return Frictional() && friction_on_; }
   // Makes the current state the start of the load step (reference of the incremental slip).
   void MarkStepStart() { u_start_ = u_; }
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
@@ -365,7 +422,6 @@ class CompactionProblem {
   PetscErrorCode SetUpLayout();      // sizes, Vec/Mat/SNES for the current candidate set
   PetscErrorCode DestroySolver();
   PetscErrorCode Gather(Vec z, bool full);  // z -> zall_ (natural order): everything, or own + ghost unknowns
-  PetscErrorCode ForceResidual(Vec F, double *force) const;  // largest unbalanced force (body and wall rows)
   PetscErrorCode Assemble(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
                           std::vector<PetscScalar> *cv, bool *inverted, std::vector<char> *active);
   void Unpack(const double *z);
@@ -440,6 +496,9 @@ class CompactionProblem {
   PetscBool monitor_contacts_ = PETSC_FALSE;  // -newton_monitor_contacts: contacts that changed state
   std::vector<char> monitor_states_;          // their states at the previous Newton iterate
   int layouts_created_ = 0;         // SetUpLayout calls (symbolic factorizations)
+  int layouts_at_step_ = 0;         // layouts_created_ at BeginLoadStep
+  State step_saved_;                // the state at BeginLoadStep (restored by a failed step)
+  double step_saved_pressure_ = 0.0;
   PetscInt mumps_extra_ = 100;      // MUMPS ICNTL(14): extra workspace in percent (doubled after INFOG(1) = -9)
 };
 
