@@ -114,7 +114,8 @@ const std::vector<std::string> kCurveColumns = {
     "P_sigma_over_E", "K_over_E", "mean_volumetric_strain", "contacts", "sliding_contacts", "newton_its", "substeps",
     "cuts", "seconds", "max_penetration", "pseudo_time_steps", "symbolic_factorizations", "unknowns",
     "rigid_unknowns", "deformable_unknowns", "tangential_unknowns", "candidates", "jacobian_nonzeros",
-    "force_residual_over_Pd", "relaxed_substeps", "gauge_torque_over_Pd2", "factorizations"};
+    "force_residual_over_Pd", "relaxed_substeps", "gauge_torque_over_Pd2", "factorizations",
+    "body_force_over_Pd", "body_torque_over_Pd2"};
 
 PetscErrorCode Run(MPI_Comm comm) {
   CompactOptions opts;
@@ -328,6 +329,8 @@ PetscErrorCode Run(MPI_Comm comm) {
     PetscCall(PetscLogStagePop());
     const PackingObservables o = ComputeObservables(problem);
     const LayoutSizes sizes = problem.Sizes();
+    CompactionProblem::Balance balance;  // of the accepted state: the largest net force and torque on a body
+    PetscCall(problem.StateBalance(&balance));
     if (level == 0)
       PetscCall(PetscPrintf(comm,
                             "  unknowns: %" PetscInt_FMT " (deformable %" PetscInt_FMT ", rigid %" PetscInt_FMT
@@ -356,7 +359,8 @@ PetscErrorCode Run(MPI_Comm comm) {
                          double(sizes.normal), double(sizes.jacobian_nonzeros),
                          rep.force_residual / (P * problem.MeanDiameter()), double(rep.relaxed_substeps),
                          problem.Summary().max_gauge_torque / (P * problem.MeanDiameter() * problem.MeanDiameter()),
-                         double(rep.factorizations)});
+                         double(rep.factorizations), balance.body_force / (P * problem.MeanDiameter()),
+                         balance.body_torque / (P * problem.MeanDiameter() * problem.MeanDiameter())});
     PetscCall(curve.Row(rows.back()));
     if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
     if (opts.checkpoint) {

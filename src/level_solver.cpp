@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <deque>
 
 namespace deformix {
 
@@ -12,9 +11,10 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Level solver", "deformix");
   PetscCall(PetscOptionsEList("-level_solver",
-                              "equilibrium of a load step: newton (semismooth Newton, one linearization per iteration, "
-                              "steps accepted by a merit function with a Levenberg-Marquardt shift on the body rows) or "
-                              "anchored (pseudo-transient continuation, each pseudo-time step solved to convergence: -ptc_*)",
+                              "equilibrium of a load step: newton (pseudo-transient continuation with one semismooth "
+                              "Newton step per pseudo-time step, each step accepted by the residual of its proximal "
+                              "subproblem) or anchored (pseudo-transient continuation, each pseudo-time step solved to "
+                              "convergence: -ptc_*)",
                               "", names, 2, names[choice], &choice, nullptr));
   PetscCall(PetscOptionsInt("-level_max_its", "newton: linearizations per load step before the step is cut", "", max_its,
                             &max_its, nullptr));
@@ -23,8 +23,9 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "largest unbalanced force, in mean diameters)",
                              "", initial_move, &initial_move, nullptr));
   PetscCall(PetscOptionsBool("-level_monitor",
-                             "newton: one line per iteration (|F|, largest force, trust radius, step fraction, merit "
-                             "ratio, accepted or rejected, closed and sliding contacts)",
+                             "newton: one line per trial step (|F|, merit |G| before and after, largest force, trust "
+                             "radius, shift, step fraction and length, accepted or rejected, closed and sliding contacts, "
+                             "residual by block) and the level criterion's balances",
                              "", monitor, &monitor, nullptr));
   PetscOptionsEnd();
   strategy = static_cast<LevelStrategy>(choice);
@@ -36,12 +37,11 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
 
 namespace {
 
-constexpr double kWeakContact = 1e3;    // a state flip within 1e3 atol of its switch is degenerate (contact_law.hpp)
-constexpr double kMaxMove = 1e6;        // trust radius cap (rho is then at its floor)
+constexpr double kMaxMove = 0.5;        // trust radius cap, in <d>
 constexpr int kMaxRejections = 12;      // rejected trial steps in a row before the load step fails
-constexpr size_t kMemory = 4;           // accepted iterates the nonmonotone residual test compares with
+constexpr int kBacktracks = 4;          // step fractions 1, 1/2, 1/4, 1/8 tried before a larger shift
 
-// The merit-globalized semismooth Newton iteration of one load step.
+// The iteration of one load step (level_solver.hpp, "newton").
 class MeritNewton {
  public:
   MeritNewton(CompactionProblem &problem, const LevelSolverParameters &params) : p_(problem), prm_(params) {}
@@ -59,7 +59,9 @@ class MeritNewton {
   Vec z_ = nullptr, F_ = nullptr;     // the problem's (layout) vectors
   Mat J_ = nullptr;
   KSP ksp_ = nullptr;
-  Vec d_ = nullptr, zt_ = nullptr, Ft_ = nullptr, floor_ = nullptr, weight_ = nullptr, work_ = nullptr;
+  Vec za_ = nullptr, G_ = nullptr, Gt_ = nullptr;  // anchor, proximal residual at the iterate and at a trial point
+  Vec d_ = nullptr, s_ = nullptr, zt_ = nullptr, Ft_ = nullptr, floor_ = nullptr, weight_ = nullptr, sqrt_weight_ = nullptr,
+      work_ = nullptr;
   double rho_in_matrix_ = 0.0;
   int layouts_ = -1;
   MPI_Comm comm_ = MPI_COMM_NULL;
@@ -68,6 +70,11 @@ class MeritNewton {
 PetscErrorCode MeritNewton::Destroy() {
   PetscFunctionBeginUser;
   PetscCall(VecDestroy(&d_));
+  PetscCall(VecDestroy(&za_));
+  PetscCall(VecDestroy(&G_));
+  PetscCall(VecDestroy(&Gt_));
+  PetscCall(VecDestroy(&s_));
+  PetscCall(VecDestroy(&sqrt_weight_));
   PetscCall(VecDestroy(&zt_));
   PetscCall(VecDestroy(&Ft_));
   PetscCall(VecDestroy(&floor_));
@@ -84,12 +91,19 @@ PetscErrorCode MeritNewton::Attach() {
   PetscCall(Destroy());
   PetscCall(PetscObjectGetComm((PetscObject)z_, &comm_));
   PetscCall(VecDuplicate(z_, &d_));
+  PetscCall(VecDuplicate(z_, &za_));
+  PetscCall(VecDuplicate(z_, &G_));
+  PetscCall(VecDuplicate(z_, &Gt_));
+  PetscCall(VecDuplicate(z_, &s_));
+  PetscCall(VecDuplicate(z_, &sqrt_weight_));
   PetscCall(VecDuplicate(z_, &zt_));
   PetscCall(VecDuplicate(z_, &Ft_));
   PetscCall(VecDuplicate(z_, &floor_));
   PetscCall(VecDuplicate(z_, &weight_));
   PetscCall(VecDuplicate(z_, &work_));
   PetscCall(p_.ShiftDiagonals(floor_, weight_));
+  PetscCall(VecCopy(weight_, sqrt_weight_));
+  PetscCall(VecSqrtAbs(sqrt_weight_));
   PetscFunctionReturn(0);
 }
 
@@ -123,14 +137,6 @@ PetscErrorCode MeritNewton::Factor(double rho, bool *ok) {
   PetscFunctionReturn(0);
 }
 
-// Penalty weight of the merit's gap term: an exact penalty needs more than the
-// largest contact force; the scale P <d> covers contacts not yet loaded.
-double PenaltyWeight(const CompactionProblem &p) {
-  double lam = p.Pressure() * p.MeanDiameter();
-  for (double l : p.Multipliers()) lam = std::max(lam, l);
-  return 10.0 * lam;
-}
-
 PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
   PetscFunctionBeginUser;
   *report = SolveReport();
@@ -139,61 +145,63 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
   const double dmean = p_.MeanDiameter();
   const double atol = 1e-11 * p_.Parameters().young * dmean;
   const double detect_every = 0.4 * p_.Parameters().contact_margin * dmean;
-  double fnorm, force, merit = 0.0;
+  const double relaxed_tol = p_.Parameters().level_force_rtol, phi_tol = p_.Parameters().level_phi_rtol;
+  double fnorm, force, phi = 0.0, phi_before = 0.0;
   bool inverted;
-  // The merit's weights are frozen for the load step (re-frozen when the
-  // candidates change), so that it is one function and the filter below can
-  // compare iterates: the penalty on gaps, and the normal forces that weight
-  // the frictional dissipation.
-  double penalty = 0.0;
-  std::vector<double> lagged;
-  // The filter (Fletcher and Leyffer): the (|F|, merit) pairs of the accepted
-  // iterates. A trial point is acceptable when, against every pair, it
-  // lowers |F| or the merit by a margin. So a rearrangement may raise |F|
-  // for some steps while the packing moves downhill, the last iterations are
-  // driven by |F| (where merit differences drown in round-off), and no
-  // cycle can return to a point the filter has seen.
-  std::vector<std::pair<double, double>> filter;
-  std::vector<double> history;  // |F| of the accepted iterates
-  const bool exact_merit = !p_.FrictionActive();
-  const auto freeze = [&]() {
-    penalty = PenaltyWeight(p_);
-    lagged = p_.Multipliers();
-    filter.clear();
-    history.clear();
-  };
+  // The iterate z: its residual F(z), and phi for the level criterion.
   const auto at_iterate = [&]() -> PetscErrorCode {
     PetscFunctionBeginUser;
     PetscCall(p_.AdoptState(z_));
-    if (exact_merit) PetscCall(p_.Merit(z_, penalty, lagged, &merit));
     PetscCall(Evaluate(z_, F_, &fnorm, &force, &inverted));
-    filter.emplace_back(fnorm, merit);
-    history.push_back(fnorm);
+    phi_before = phi;
+    if (relaxed_tol > 0.0) phi = p_.Summary().packing_fraction;
     PetscFunctionReturn(0);
   };
-  freeze();
+  double move = prm_.initial_move;  // trust radius m, in <d>
+  double rho = 0.0;
+  // A new anchor at the iterate: G = F there, rho from its largest force.
+  const auto anchor = [&]() -> PetscErrorCode {
+    PetscFunctionBeginUser;
+    PetscCall(VecCopy(z_, za_));
+    PetscCall(VecCopy(F_, G_));
+    rho = force / (move * dmean);
+    PetscFunctionReturn(0);
+  };
+  // G(z') = F(z') + rho D (z' - z_a) at a point with residual F.
+  const auto proximal = [&](Vec zp, Vec Fp, Vec Gp, double *norm) -> PetscErrorCode {
+    PetscFunctionBeginUser;
+    PetscCall(VecWAXPY(work_, -1.0, za_, zp));
+    PetscCall(VecPointwiseMult(work_, work_, weight_));
+    PetscCall(VecWAXPY(Gp, rho, work_, Fp));
+    PetscCall(VecNorm(Gp, NORM_2, norm));
+    PetscFunctionReturn(0);
+  };
   PetscCall(at_iterate());
+  PetscCall(anchor());
+  double gnorm = fnorm;
   std::vector<char> active_before = p_.ActiveSet();
-  double move = prm_.initial_move;     // trust radius m, in <d>
-  double moved = 0.0;                  // largest body move since the last candidate check
-  double changed_margin = INFINITY;    // largest switch margin of the contacts that changed in the last step
-  double last_step = INFINITY;         // largest move of the last accepted step
+  double moved = 0.0;                // largest body move since the last candidate check
+  double changed_margin = INFINITY;  // largest switch margin of the contacts that changed in the last step
+  double last_step = INFINITY;       // largest body move of the last accepted step
   int rejections = 0;
   bool converged = false;
   for (;;) {
     // Converged: small residual with a stable contact state, and every
-    // contact that can touch is a candidate.
+    // contact that can touch is a candidate (checked whenever a body may
+    // have crossed the candidate margin since the last check).
     const bool small = std::isfinite(fnorm) && fnorm <= atol;
-    const bool stable = report->newton_its == 0 || changed_margin <= kWeakContact * atol || last_step <= 1e-12 * dmean;
+    const bool stable = report->newton_its == 0 || changed_margin <= kDegenerateSwitch * atol || last_step <= 1e-12 * dmean;
     if (moved > detect_every || small) {
       bool stale = false;
-      PetscCall(p_.CandidatesStale(&stale));  // reads the state of the iterate (at_iterate adopted it)
+      PetscCall(p_.CandidatesStale(&stale));  // the state of the iterate (adopted by at_iterate)
       moved = 0.0;
       if (stale) {
         PetscCall(p_.RefreshCandidates());
         ++report->candidate_refreshes;
         PetscCall(Attach());
         PetscCall(at_iterate());
+        PetscCall(anchor());
+        gnorm = fnorm;
         active_before = p_.ActiveSet();
         changed_margin = INFINITY;
         continue;
@@ -201,6 +209,29 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
       if (small && stable) {
         converged = true;
         break;
+      }
+    }
+    // The paper's level criterion (-level_force_rtol > 0), per body: every
+    // body's net force and torque below tol P <d> and tol P <d>^2, every
+    // nodal force and contact row below tol P <d>, the contact states
+    // stable and phi settled over the last step.
+    if (relaxed_tol > 0.0 && report->newton_its > 0 && stable && std::abs(phi - phi_before) <= phi_tol * phi) {
+      CompactionProblem::Balance b;
+      PetscCall(p_.BodyBalance(F_, &b));
+      const double f_tol = relaxed_tol * pressure * dmean;
+      if (prm_.monitor)
+        PetscCall(PetscPrintf(comm_, "    level criterion: body force %.2e torque %.2e node %.2e contact rows %.2e (tolerance %.2e), phi change %.1e\n",
+                              b.body_force, b.body_torque / dmean, b.node_force, b.contact_row, f_tol, std::abs(phi - phi_before) / phi));
+      if (b.body_force <= f_tol && b.body_torque <= f_tol * dmean && b.node_force <= f_tol && b.contact_row <= f_tol) {
+        bool stale = false;
+        PetscCall(p_.CandidatesStale(&stale));
+        if (!stale) {
+          converged = true;
+          report->relaxed = true;
+          break;
+        }
+        moved = INFINITY;  // refresh at the next pass
+        continue;
       }
     }
     if (report->newton_its >= prm_.max_its) {
@@ -213,21 +244,18 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
     ++report->newton_its;
     bool accepted = false;
     while (!accepted) {
-      const double rho = force / (move * dmean);
       bool ok = false;
       PetscCall(Factor(rho, &ok));
       ++report->factorizations;
-      double alpha = 1.0, ratio = 0.0, trial_norm = INFINITY, trial_force = 0.0, trial_merit = INFINITY, step = 0.0;
-      bool trial_inverted = false, by_energy = false;
       if (ok) {
         KSPConvergedReason kreason;
-        PetscCall(KSPSolve(ksp_, F_, d_));
+        PetscCall(KSPSolve(ksp_, G_, d_));
         PetscCall(KSPGetConvergedReason(ksp_, &kreason));
         ok = kreason > 0;
       }
       if (!ok) {
-        // A singular or failed factorization: MUMPS out of workspace gets a
-        // larger one (new layout); anything else a larger shift.
+        // A failed factorization: MUMPS out of workspace gets a larger one
+        // (a new layout); anything else (a singular matrix) a larger shift.
         PC pc;
         PCFailedReason pc_reason;
         PetscCall(KSPGetPC(ksp_, &pc));
@@ -238,84 +266,82 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
           PetscCall(PetscInfo(nullptr, "MUMPS workspace too small (INFOG(1) = -9): enlarged\n"));
           PetscCall(Attach());
           PetscCall(at_iterate());
+          PetscCall(anchor());
+          gnorm = fnorm;
           PetscCall(p_.NewtonMatrix(z_, J_));
           rho_in_matrix_ = 0.0;
           continue;
         }
+        if (prm_.monitor)
+          PetscCall(PetscPrintf(comm_, "    newton %3" PetscInt_FMT "  factorization failed (%s) at rho %.1e\n",
+                                report->newton_its, PCFailedReasons[pc_reason], rho));
       } else {
-        PetscCall(VecScale(d_, -1.0));  // (J + rho D) d = -F
-        PetscCall(p_.ContactStepFraction(d_, &alpha));
-        if (alpha < 1.0) PetscCall(VecScale(d_, alpha));
-        double dmin;
-        PetscCall(VecMax(d_, nullptr, &step));
-        PetscCall(VecMin(d_, nullptr, &dmin));
-        step = std::max(step, -dmin);
-        PetscCall(p_.RotatedUpdate(z_, d_, zt_));
-        PetscCall(Evaluate(zt_, Ft_, &trial_norm, &trial_force, &trial_inverted));
-        if (exact_merit && std::isfinite(trial_norm)) PetscCall(p_.Merit(zt_, penalty, lagged, &trial_merit));
-        // Model quality, for the trust radius: the proximal residual
-        // G(z') = F(z') + (floor + rho D)(z' - z), whose Newton direction at z
-        // is d (G(z) = F(z), G' = the factored matrix), against its linear
-        // model at s = alpha d, (1 - alpha) F.
-        PetscCall(VecWAXPY(work_, rho, weight_, floor_));
-        PetscCall(VecPointwiseMult(work_, work_, d_));
-        PetscCall(VecAXPY(work_, 1.0, Ft_));
-        double proximal_norm;
-        PetscCall(VecNorm(work_, NORM_2, &proximal_norm));
-        const double predicted = 1.0 - (1.0 - alpha) * (1.0 - alpha);
-        ratio = std::isfinite(trial_norm) ? (1.0 - (proximal_norm / fnorm) * (proximal_norm / fnorm)) / predicted : -INFINITY;
-        // Nonmonotone residual test: against the largest |F| of the last
-        // kMemory accepted iterates (a change of the active set may raise |F|
-        // for a step on the way to the solution).
-        double reference = 0.0;
-        for (size_t k = history.size() > kMemory ? history.size() - kMemory : 0; k < history.size(); ++k)
-          reference = std::max(reference, history[k]);
-        bool acceptable = std::isfinite(trial_norm) && trial_norm <= (1.0 - 1e-4) * reference;
-        if (!acceptable && exact_merit && std::isfinite(trial_merit)) {
-          // Frictionless: the merit is the exact penalty function of the
-          // problem, and the filter decides.
-          const double length = 1e-3 * dmean;  // converts a force margin into an energy margin
-          acceptable = true;
-          for (const auto &[theta, phi] : filter)
-            if (!(trial_norm <= (1.0 - 1e-4) * theta || trial_merit <= phi - 1e-4 * length * theta)) acceptable = false;
+        PetscCall(VecScale(d_, -1.0));  // (J + rho D) d = -G
+        // Step fraction: open contacts not driven deep into penetration, and
+        // no body moving (or turning, times its radius) more than m <d> in
+        // one step: the shift alone does not bound a mode whose force is far
+        // below |F|_inf.
+        double alpha0, full_move;
+        PetscCall(p_.ContactStepFraction(d_, &alpha0));
+        PetscCall(VecPointwiseMult(work_, d_, sqrt_weight_));
+        PetscCall(VecNorm(work_, NORM_INFINITY, &full_move));
+        if (full_move > move * dmean) alpha0 = std::min(alpha0, move * dmean / full_move);
+        // Backtracking (Armijo on |G| along its Newton direction d) before a
+        // larger shift, which costs a factorization.
+        for (int bt = 0; bt < kBacktracks && !accepted; ++bt) {
+          const double alpha = alpha0 * std::ldexp(1.0, -bt);
+          double trial_norm, trial_force, trial_gnorm;
+          bool trial_inverted;
+          PetscCall(VecAXPBY(s_, alpha, 0.0, d_));
+          PetscCall(p_.RotatedUpdate(z_, s_, zt_));
+          PetscCall(Evaluate(zt_, Ft_, &trial_norm, &trial_force, &trial_inverted));
+          PetscCall(proximal(zt_, Ft_, Gt_, &trial_gnorm));
+          if (!std::isfinite(trial_norm)) trial_gnorm = INFINITY;
+          accepted = trial_gnorm <= (1.0 - 1e-4 * alpha) * gnorm;
+          double step;
+          PetscCall(VecPointwiseMult(work_, s_, sqrt_weight_));
+          PetscCall(VecNorm(work_, NORM_INFINITY, &step));
+          if (prm_.monitor) {
+            double blocks[5];
+            PetscCall(p_.ResidualBlocks(Ft_, blocks));
+            int closed = 0, sliding = 0;
+            for (char a : p_.ActiveSet()) closed += a == kClosed, sliding += a == kSliding;
+            PetscCall(PetscPrintf(comm_,
+                                  "    newton %3" PetscInt_FMT "  |F| %.3e  |G| %.3e -> %.3e (trial |F| %.3e)  |F|_inf %.2e  "
+                                  "m %.1e rho %.1e  alpha %.3f |s| %.1e  %s  closed %d sliding %d  "
+                                  "(trial rows: body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)\n",
+                                  report->newton_its, fnorm, gnorm, trial_gnorm, trial_norm, force, move, rho, alpha, step,
+                                  accepted ? "accepted" : "rejected", closed, sliding, blocks[0], blocks[1], blocks[2],
+                                  blocks[3], blocks[4]));
+          }
+          if (accepted) {
+            last_step = step;
+            moved += step;
+            gnorm = trial_gnorm;
+          }
         }
-        by_energy = acceptable && trial_norm > fnorm;
-        accepted = acceptable;
-      }
-      if (prm_.monitor && getenv("DFX_BLOCKS")) {
-        double b[5], c[5];
-        PetscCall(p_.ResidualBlocks(Ft_, b));
-        PetscCall(p_.ResidualBlocks(F_, c));
-        PetscCall(PetscPrintf(comm_, "      blocks now: body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e | trial: body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e\n",
-                              c[0], c[1], c[2], c[3], c[4], b[0], b[1], b[2], b[3], b[4]));
-      }
-      if (prm_.monitor) {
-        int closed = 0, sliding = 0;
-        for (char a : p_.ActiveSet()) closed += a == kClosed, sliding += a == kSliding;
-        PetscCall(PetscPrintf(comm_,
-                              "    newton %3" PetscInt_FMT "  |F| %.3e -> %.3e  |F|_inf %.2e  merit %+.3e  move %.1e rho %.1e  "
-                              "alpha %.2f |s| %.1e  ratio %6.3f  %s  closed %d sliding %d\n",
-                              report->newton_its, fnorm, trial_norm, force, trial_merit - merit, move, rho, alpha, step,
-                              ratio, !ok ? "failed factorization" : accepted ? (by_energy ? "accepted (merit)" : "accepted")
-                                                                             : "rejected",
-                              closed, sliding));
       }
       if (accepted) {
         rejections = 0;
-        if (ratio > 0.75) move = std::min(4.0 * move, kMaxMove);
-        else if (ratio < 0.25 && !by_energy) move *= 0.5;
         PetscCall(VecCopy(zt_, z_));
         PetscCall(p_.ChangedStateMargin(active_before, &changed_margin));
         active_before = p_.ActiveSet();
         PetscCall(at_iterate());
-        last_step = step;
-        moved += step;
+        // Pseudo-transient continuation with one Newton step per pseudo-time
+        // step: the anchor moves to every accepted iterate, and the trust
+        // radius grows after every accepted step.
+        move = std::min(4.0 * move, kMaxMove);
+        PetscCall(anchor());
+        gnorm = fnorm;
         break;
       }
+      // No acceptable step: a shorter radius, anchored at the iterate.
       move *= 0.25;
       if (++rejections > kMaxRejections) break;
-      // Back to the iterate: the step limiter reads the residual's contact data there.
+      // Back to the iterate (the step limiter reads the residual's contact data there).
       PetscCall(Evaluate(z_, F_, &fnorm, &force, &inverted));
+      PetscCall(anchor());
+      gnorm = fnorm;
     }
     if (!accepted) {
       report->reason = SNES_DIVERGED_LINE_SEARCH;

@@ -804,7 +804,6 @@ PetscErrorCode FormJacobian(SNES, Vec z, Mat J, Mat, void *ctx) {
 }
 
 // Converged only when the residual is small and the contact states are stable.
-constexpr double kWeakContact = 1e3;  // a flip within 1e3 atol (1e-8 E<d>) of the switch is degenerate
 PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal snorm, PetscReal fnorm,
                                SNESConvergedReason *reason, void *ctx) {
   auto *p = static_cast<CompactionProblem *>(ctx);
@@ -832,13 +831,13 @@ PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal snor
     *reason = SNES_DIVERGED_FNORM_NAN;
   } else if (fnorm <= std::max<PetscReal>(atol, rtol * p->fnorm0_) &&
              (it == 0 || !changed_any || snorm <= 1e-12 * p->mean_diameter_ ||
-              changed_margin <= kWeakContact * atol)) {
+              changed_margin <= kDegenerateSwitch * atol)) {
     // A contact state may still flip at a converged point when the contact
     // is degenerate (lambda_n = g = 0 to round-off, e.g. a rattler resting
     // on a neighbour, or |lambda_t| = mu lambda_n with no slip): both
     // linearizations hold there, and the residual, which uses the exact NCP
     // functions, is already zero. Such flips are accepted when every contact
-    // that changed is within kWeakContact atol of its switch. Two-pass
+    // that changed is within kDegenerateSwitch atol of its switch. Two-pass
     // deformable contact makes them common: the two passes of a conforming
     // contact share its force in an indeterminate way, and each Newton step
     // moves the share, flipping weakly loaded nodes (lambda_n ~ 1e-10 E<d>)
@@ -1010,27 +1009,38 @@ PetscErrorCode CompactionProblem::ContactStepFraction(Vec dz, double *fraction) 
   PetscFunctionReturn(0);
 }
 
-// Line-search post-check: after an active-set cycle was detected (LimitStep),
-// the step W = X - Y is backtracked, alpha = 1, 1/2, ..., 1/64, until |R|
-// decreases (Armijo with the Newton slope -|R|^2, sigma = 1e-4); if no
-// fraction decreases it, the one with the smallest |R| is taken. Plain
+// Line-search post-check. The trial point W = X - lambda Y becomes
+// RotatedUpdate(X, -lambda Y): each deformable body's mean rotation is applied
+// as a finite rotation (a linearized rotation of a nearly incompressible disk
+// changes its area, see RotatedUpdate). After an active-set cycle was
+// detected (LimitStep), the step is backtracked, alpha = 1, 1/2, ..., 1/64,
+// until |R| decreases (Armijo with the Newton slope -|R|^2, sigma = 1e-4); if
+// no fraction decreases it, the one with the smallest |R| is taken. Plain
 // semismooth Newton is non-monotone (a change of the active set may raise
 // |R| for one step), so this monotone safeguard is only used on cycles,
 // which it breaks: a cycle returns |R| to a value it had before.
 PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *changed_Y, PetscBool *changed_W, void *ctx) {
   auto *p = static_cast<CompactionProblem *>(ctx);
+  PetscReal xnorm, fnorm, ynorm, lambda;
   PetscFunctionBeginUser;
   *changed_Y = PETSC_FALSE;
-  *changed_W = PETSC_FALSE;
+  PetscCall(SNESLineSearchGetLambda(ls, &lambda));  // W = X - lambda Y (1 for the basic line search)
+  if (!p->step_) PetscCall(VecDuplicate(p->r_, &p->step_));
+  const auto trial = [&](double alpha) -> PetscErrorCode {
+    PetscFunctionBeginUser;
+    PetscCall(VecAXPBY(p->step_, -alpha * lambda, 0.0, Y));
+    PetscCall(p->RotatedUpdate(X, p->step_, W));
+    PetscFunctionReturn(0);
+  };
+  PetscCall(trial(1.0));
+  *changed_W = PETSC_TRUE;
   if (!p->backtrack_) PetscFunctionReturn(0);
   p->backtrack_ = false;
-  PetscReal xnorm, fnorm, ynorm, lambda;
   PetscCall(SNESLineSearchGetNorms(ls, &xnorm, &fnorm, &ynorm));
-  PetscCall(SNESLineSearchGetLambda(ls, &lambda));  // W = X - lambda Y (1 for the basic line search)
   if (!p->work_) PetscCall(VecDuplicate(p->r_, &p->work_));
   double best_alpha = 1.0, best_norm = INFINITY;
   for (double alpha = 1.0; alpha >= 1.0 / 64; alpha *= 0.5) {
-    PetscCall(VecWAXPY(W, -alpha * lambda, Y, X));
+    PetscCall(trial(alpha));
     PetscCall(FormFunction(nullptr, W, p->work_, p));
     PetscReal norm;
     PetscCall(VecNorm(p->work_, NORM_2, &norm));
@@ -1038,11 +1048,10 @@ PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *chan
     if (norm < best_norm) best_norm = norm, best_alpha = alpha;
     if (norm <= (1.0 - 1e-4 * alpha) * fnorm) break;
   }
-  PetscCall(VecWAXPY(W, -best_alpha * lambda, Y, X));
+  PetscCall(trial(best_alpha));
   if (best_alpha < 1.0) {
     PetscCall(VecScale(Y, best_alpha));
     *changed_Y = PETSC_TRUE;
-    *changed_W = PETSC_TRUE;
   }
   PetscFunctionReturn(0);
 }
@@ -1056,6 +1065,7 @@ PetscErrorCode CompactionProblem::DestroySolver() {
   PetscCall(VecDestroy(&zall_));
   PetscCall(VecDestroy(&yall_));
   PetscCall(VecDestroy(&work_));
+  PetscCall(VecDestroy(&step_));
   PetscCall(VecDestroy(&fall_));
   PetscCall(VecScatterDestroy(&to_all_));
   PetscCall(VecScatterDestroy(&to_local_));
@@ -1348,41 +1358,57 @@ PetscErrorCode CompactionProblem::RotatedUpdate(Vec zv, Vec dv, Vec ztv) const {
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode CompactionProblem::Merit(Vec zv, double penalty, const std::vector<double> &lagged, double *value) {
-  const PetscScalar *z;
+PetscErrorCode CompactionProblem::BodyBalance(Vec Fv, Balance *balance) const {
+  const PetscScalar *f;
   PetscFunctionBeginUser;
-  PetscCall(Gather(zv, false));
-  PetscCall(VecGetArrayRead(zall_, &z));
-  double sum = 0.0;
-  std::vector<double> Xe, xe;
-  for (const DeformableBody &body : bodies_) {
+  Balance b;
+  PetscCall(VecGetArrayRead(Fv, &f));
+  const auto local = [&](PetscInt natural) { return f[petsc_of_[natural] - own_lo_]; };
+  for (int d = 0; d < static_cast<int>(bodies_.size()); ++d) {
+    const DeformableBody &body = bodies_[d];
     if (ParticleOwner(body.particle) != rank_) continue;
-    const DiskMesh &m = body.mesh;
-    const int nen = m.nodes_per_cell();
-    Xe.resize(2 * nen), xe.resize(2 * nen);
-    for (int e = 0; e < m.num_cells(); ++e) {
-      for (int a = 0; a < nen; ++a) {
-        const int n = m.cells[e * nen + a];
-        for (int i = 0; i < 2; ++i) {
-          Xe[2 * a + i] = m.X[2 * n + i];
-          xe[2 * a + i] = m.X[2 * n + i] + z[body.dof_offset + 2 * n + i];
-        }
-      }
-      const ElementResult r = triangle_element(material_, m.order, Xe.data(), xe.data(), nullptr, nullptr);
-      sum += r.inverted ? INFINITY : r.energy;
+    const int nn = body.mesh.num_nodes();
+    double c[2];
+    BodyCentroid(d, c);
+    double net[2] = {0, 0}, torque = 0.0;
+    for (int a = 0; a < nn; ++a) {
+      const PetscInt i = body.dof_offset + 2 * a;
+      const double fa[2] = {local(i), local(i + 1)};
+      double x[2];
+      NodePosition(d, a, x);
+      net[0] += fa[0], net[1] += fa[1];
+      torque += (x[0] - c[0]) * fa[1] - (x[1] - c[1]) * fa[0];
+      b.node_force = std::max(b.node_force, std::max(std::abs(fa[0]), std::abs(fa[1])));
     }
+    b.body_force = std::max(b.body_force, std::hypot(net[0], net[1]));
+    b.body_torque = std::max(b.body_torque, std::abs(torque));
   }
-  if (rank_ == 0) sum += pressure_ * WallBox::area(z + WallOffset());
-  const double mu = friction_on_ ? params_.friction : 0.0;
-  LocalContact lc;
-  for (size_t c = 0; c < candidates_.size(); ++c) {
-    if (CandidateOwner(candidates_[c]) != rank_) continue;
-    ContactGeometry(candidates_[c], z, &lc);
-    sum += penalty * std::max(0.0, -lc.k.gap);
-    if (tangential_index_[c] >= 0 && c < lagged.size()) sum += mu * std::max(0.0, lagged[c]) * std::abs(lc.k.slip);
+  for (const RigidBody &r : rigid_) {
+    if (ParticleOwner(r.particle) != rank_) continue;
+    const double fx = local(r.dof_offset), fy = local(r.dof_offset + 1);
+    const double torque = Frictional() ? std::abs(local(r.dof_offset + 2)) : 0.0;
+    b.body_force = std::max(b.body_force, std::hypot(fx, fy));
+    b.body_torque = std::max(b.body_torque, torque);
+    b.node_force = std::max({b.node_force, std::abs(fx), std::abs(fy), torque / r.radius});
   }
-  PetscCall(VecRestoreArrayRead(zall_, &z));
-  PetscCallMPI(MPI_Allreduce(&sum, value, 1, MPI_DOUBLE, MPI_SUM, comm_));
+  for (PetscInt i = own_lo_; i < own_hi_; ++i) {
+    const PetscInt n = natural_of_[i];
+    if (n >= WallOffset() && n < GaugeOffset()) b.node_force = std::max(b.node_force, std::abs(f[i - own_lo_]));
+    if (n >= MultiplierOffset()) b.contact_row = std::max(b.contact_row, std::abs(f[i - own_lo_]));
+  }
+  PetscCall(VecRestoreArrayRead(Fv, &f));
+  PetscCallMPI(MPI_Allreduce(&b, balance, 4, MPI_DOUBLE, MPI_MAX, comm_));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::StateBalance(Balance *balance) {
+  Vec z = nullptr, F = nullptr;
+  Mat J = nullptr;
+  KSP ksp = nullptr;
+  PetscFunctionBeginUser;
+  PetscCall(Layout(&z, &F, &J, &ksp));
+  PetscCall(EvaluateResidual(z, F));
+  PetscCall(BodyBalance(F, balance));
   PetscFunctionReturn(0);
 }
 

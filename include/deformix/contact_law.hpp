@@ -74,6 +74,9 @@ TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double s
 // {normal, tangential} (2n values) at the second one, returns the largest
 // margin of a switch that happened: the normal margin for open <-> closed
 // or sliding, the tangential one for stick <-> slip (0 if nothing changed).
+// A state change whose margin is within this many Newton tolerances of the
+// switch is degenerate: both states' equations hold at the converged point.
+constexpr double kDegenerateSwitch = 1e3;
 double changed_state_margin(const std::vector<char> &was, const std::vector<char> &now,
                             const std::vector<double> &margins);
 

@@ -1,38 +1,46 @@
 // Equilibrium at one load step: the strategy that drives the operator of
 // CompactionProblem (residual F, Newton matrix, state) to F = 0.
 //
-// newton (default): semismooth Newton globalized by a merit function.
-//   Every iteration linearizes once, at the iterate z_k, and solves
+// newton: pseudo-transient continuation with ONE semismooth Newton step per
+//   pseudo-time step (Kelley and Keyes' Psi-tc; the idea of PETSc's
+//   TSPSEUDO), each step tested against a merit function. Iteration k
+//   linearizes once, at z_k, and solves
 //       (J(z_k) + rho_k D) d = -F(z_k),
 //   J the generalized Jacobian (exact NCP rows for Signorini and Coulomb,
 //   contact_law.hpp), D the identity on body and wall unknowns (r^2 on rigid
-//   rotations). rho_k = |F(z_k)|_inf / (m_k <d>) is a Levenberg-Marquardt
-//   shift: a body under an unbalanced force f moves by at most about m_k <d>,
-//   so rattlers, free rotations and rearranging particles (zero or negative
-//   curvature) take bounded steps, and rho_k -> 0 with F, so the last
-//   iterations are plain semismooth Newton steps. The trial step (shortened
-//   so that no open contact is driven deep into penetration) is tested
-//   against the merit M(z) = |F(z)|^2 / 2 with the ratio of actual to
-//   predicted decrease,
-//       ratio = (M(z_k) - M(z_k + s)) / (M(z_k) - |F + J s|^2 / 2),
-//   and the trust radius m_k is updated as in a trust-region method: x4
-//   after a very good step (ratio > 0.75), /2 after a poor one (< 0.25).
-//   A step is accepted when M decreases by at least 1e-4 of the prediction
-//   compared with the largest M of the last three accepted iterates (a
-//   non-monotone test: a change of the active set may raise M for one step
-//   on the way to a solution); a rejected step is re-solved from the same
-//   linearization with m_k / 4 (one more factorization, no new assembly).
-//   Converged when |F|_2 <= atol and no contact changed state in the last
-//   step (deal.II step-42's rule; degenerate flips within 1e3 atol of their
-//   switch excepted, contact_law.hpp).
-//   PETSc's SNESNEWTONTR does not fit: its trust region is a dogleg on the
-//   Newton direction with the radius in the 2-norm of all unknowns
-//   (multipliers included), which neither bounds the move of each body nor
-//   keeps the Newton matrix nonsingular on floppy modes; its line searches
-//   cannot re-solve with a different shift. Hence this loop, on PETSc's KSP
-//   and the problem's residual and Jacobian.
+//   rotations), rho_k = |F(z_k)|_inf / (m_k <d>): a body under the largest
+//   unbalanced force moves by about m_k <d>, so rattlers, free rotations and
+//   rearranging particles (zero or negative curvature) take bounded steps,
+//   and rho_k vanishes with F, so the last iterations are plain semismooth
+//   Newton steps. The step is d shortened so that no open contact is driven
+//   deep into penetration and no body moves more than m_k <d>, applied with
+//   the finite rotation of each deformable body (RotatedUpdate).
+//   The merit is the residual of the proximal subproblem anchored at z_k,
+//       G_k(z) = F(z) + rho_k D (z - z_k),
+//   whose Newton direction at z_k is exactly d (G_k(z_k) = F(z_k), G_k' the
+//   factored matrix), so d is a descent direction of |G_k| even where J is
+//   indefinite (saddle-point contact rows, unstable rearrangements), which
+//   |F| itself does not guarantee for a shifted step. A step is accepted when
+//   |G_k| decreases by the Armijo fraction 1e-4 alpha along d; alpha = 1,
+//   1/2, 1/4, 1/8 are tried (one residual each), then m_k / 4 (one more
+//   factorization of the same linearization). After an accepted step m grows
+//   x4 (to at most <d> / 2) and the next pseudo-time step is anchored at the
+//   new iterate.
+//   A load step is converged when |F|_2 <= 1e-11 E <d> and no contact
+//   changed state in the last step (deal.II step-42's rule; degenerate flips
+//   within 1e3 atol of their switch excepted, contact_law.hpp), or, with
+//   -level_force_rtol tol > 0, by the paper's criterion per body: the net
+//   force and torque of every body below tol P <d> and tol P <d>^2, every
+//   nodal force and contact row below tol P <d>, the contact states stable
+//   and phi settled to -level_phi_rtol over the last step.
+//   PETSc's SNESNEWTONTR does not fit: its trust region is a dogleg in the
+//   2-norm of all unknowns (multipliers included), which neither bounds the
+//   move of each body nor regularizes floppy modes, and its line searches
+//   cannot re-solve with a larger shift. Hence this loop on PETSc's KSP and
+//   the problem's residual and Jacobian.
 // anchored: pseudo-transient continuation with each pseudo-time step solved
-//   to convergence (CompactionProblem::Solve, the -ptc_* options).
+//   to convergence by SNESNEWTONLS (CompactionProblem::Solve, the -ptc_*
+//   options; accepted by the per-node criterion |F|_inf <= tol P <d>).
 #pragma once
 #include "deformix/problem.hpp"
 

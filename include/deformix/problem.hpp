@@ -308,11 +308,16 @@ class CompactionProblem {
   // of a frictionless disk a Newton step would be valid only for theta <<
   // sqrt(|F| / lambda); with the rotation applied exactly it is not limited.
   PetscErrorCode RotatedUpdate(Vec z, Vec d, Vec zt) const;
-  // Merit of the state z for a level solver: the enthalpy sum_b W_b(u) + P area(w),
-  // plus the frictional dissipation mu sum_c lagged_c |s_c(z)| with lagged normal
-  // forces (aligned with the candidates), plus penalty sum_c max(0, -g_c(z)) for
-  // every candidate. Collective; clobbers the gathered iterate (as a residual does).
-  PetscErrorCode Merit(Vec z, double penalty, const std::vector<double> &lagged, double *value);
+  // Balance of a residual F at the problem's state, for the level criterion:
+  // the largest net force and net torque (about its centroid) on a body, the
+  // largest nodal or wall force (torques of rigid rotations / radius), and the
+  // largest contact row. Collective.
+  struct Balance {
+    double body_force = 0.0, body_torque = 0.0, node_force = 0.0, contact_row = 0.0;
+  };
+  PetscErrorCode BodyBalance(Vec F, Balance *balance) const;
+  // The balance of the current state's residual (collective).
+  PetscErrorCode StateBalance(Balance *balance);
   // 2-norms of the blocks of a residual: body, wall, gauge, normal-contact and tangential rows.
   PetscErrorCode ResidualBlocks(Vec F, double norm[5]) const;
   // Largest |contact state switch margin| of the contacts whose state differs
@@ -379,7 +384,6 @@ class CompactionProblem {
   // the unknowns (the protocol: settle the packing frictionless, then turn
   // friction on).
   void SetFrictionActive(bool on) { friction_on_ = on; }
-  bool FrictionActive() const { return Frictional() && friction_on_; }
   // Makes the current state the start of the load step (reference of the incremental slip).
   void MarkStepStart() { u_start_ = u_; }
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
@@ -474,6 +478,7 @@ class CompactionProblem {
   std::vector<int> particle_owner_;  // rank of each particle (empty: everything on rank 0)
   Vec yall_ = nullptr;               // replicated Newton step (LimitStep), allocated with the layout
   Vec work_ = nullptr;               // residual at trial points of Backtrack
+  Vec step_ = nullptr;               // the step of a trial point of Backtrack
   bool backtrack_ = false;           // LimitStep found an active-set cycle: Backtrack this step
   VecScatter to_all_ = nullptr;     // whole state, natural order (once per solve: replicated copy)
   VecScatter to_local_ = nullptr;   // own + ghost unknowns only (every Newton iteration; reverse: residual)

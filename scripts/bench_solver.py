@@ -1,0 +1,214 @@
+#!/usr/bin/python3
+"""Level-solver benchmark: the strategies of -level_solver side by side.
+
+Runs build/bin/compact once per (scene, strategy) and records per pressure
+level: Newton iterations (linearizations), numeric factorizations, seconds,
+phi, P_sigma/P, the largest net force on a body and the largest nodal force
+(both / P <d>), and the deepest penetration. Every run of a scene uses the
+same options except -level_solver, so the rows compare the strategies on
+the same packing and load path.
+
+Scenes (--scenes):
+  default     petsc-options/default.opts (20 disks, kappa 0.5, friction 0.2)
+  campaign50  the eight 50-disk runs kappa {0.2, 0.5, 0.8, 1} x friction {0, 0.2}
+  large400    400 disks, kappa 0.5 friction 0.2 and kappa 1 friction 0
+  paper1500   petsc-options/paper.opts (1500 disks) on --ranks ranks
+--pressures replaces the pressure list of campaign50, large400 and paper1500.
+
+Outputs: <out>.csv (one row per level and run; '#' lines: machine, commit,
+command) and <out>.png (Newton iterations per level and seconds per run).
+--jobs 2 runs two simulations at a time: Newton iterations and
+factorizations are unaffected, seconds are then those of a shared machine.
+
+Usage:
+  /usr/bin/python3 scripts/bench_solver.py --scenes default
+  /usr/bin/python3 scripts/bench_solver.py --scenes default campaign50 --pressures 1e-4,3e-4,1e-3,3e-3,0.01,0.02,0.05 --jobs 2
+"""
+import argparse
+import concurrent.futures as cf
+import csv
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CAMPAIGN_PRESSURES = "1e-4,3e-4,1e-3,3e-3,0.01,0.02,0.05,0.1,0.15,0.2,0.25,0.3,0.4,0.5"
+
+
+def git_commit():
+    try:
+        return subprocess.check_output(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], text=True).strip()
+    except Exception:
+        return "unknown"
+
+
+def cpu_name():
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def scene_runs(a):
+    """(scene, label, ranks, options) of every run, without -level_solver."""
+    runs = []
+    p = a.pressures
+    for s in a.scenes:
+        if s == "default":
+            runs.append((s, "n20_k0.5_mu0.2", 1, ["-options_file", os.path.join(ROOT, "petsc-options", "default.opts")]))
+        elif s == "campaign50":
+            for mu in (0.0, 0.2):
+                for k in (0.2, 0.5, 0.8, 1.0):
+                    runs.append((s, f"n50_k{k:g}_mu{mu:g}", 1, ["-n_particles", "50", "-kappa", str(k), "-friction", str(mu),
+                                                               "-pressures", p or CAMPAIGN_PRESSURES]))
+        elif s == "large400":
+            for k, mu in ((0.5, 0.2), (1.0, 0.0)):
+                runs.append((s, f"n400_k{k:g}_mu{mu:g}", 1, ["-n_particles", "400", "-kappa", str(k), "-friction", str(mu),
+                                                            "-pressures", p or CAMPAIGN_PRESSURES]))
+        elif s == "paper1500":
+            opts = ["-options_file", os.path.join(ROOT, "petsc-options", "paper.opts"), "-kappa", "0.5", "-friction", "0.2"]
+            runs.append((s, "n1500_k0.5_mu0.2", a.ranks, opts + (["-pressures", p] if p else [])))
+        else:
+            sys.exit(f"unknown scene {s}: use default, campaign50, large400 or paper1500")
+    return runs
+
+
+def run_one(a, scene, label, ranks, opts, strategy):
+    out = os.path.join(a.runs, f"{label}_{strategy}")
+    os.makedirs(out, exist_ok=True)
+    cmd = ([a.mpiexec, "--allow-run-as-root", "-n", str(ranks)] if ranks > 1 else []) + \
+          [a.exe] + opts + ["-level_solver", strategy, "-output_dir", out, "-checkpoint", "false"] + a.extra.split()
+    t0 = time.time()
+    try:
+        p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=a.timeout)
+        status, log = ("ok" if p.returncode == 0 else "failed"), p.stdout
+    except subprocess.TimeoutExpired as e:
+        status, log = "timeout", (e.stdout.decode() if isinstance(e.stdout, bytes) else (e.stdout or ""))
+    wall = time.time() - t0
+    with open(os.path.join(out, "log.txt"), "w") as f:
+        f.write(" ".join(cmd) + "\n" + log)
+    rows = []
+    curve = os.path.join(out, "curve.csv")
+    if os.path.exists(curve):
+        with open(curve) as f:
+            for r in csv.DictReader(f):
+                P = float(r["P_over_E"])
+                rows.append({
+                    "scene": scene, "run": label, "strategy": strategy, "ranks": ranks, "status": status,
+                    "P_over_E": P, "newton_its": int(float(r["newton_its"])),
+                    "factorizations": int(float(r["factorizations"])), "seconds": float(r["seconds"]),
+                    "phi": float(r["phi"]), "P_sigma_over_P": float(r["P_sigma_over_E"]) / P,
+                    "body_force_over_Pd": float(r["body_force_over_Pd"]),
+                    "node_force_over_Pd": float(r["force_residual_over_Pd"]),
+                    "max_penetration": float(r["max_penetration"]), "substeps": int(float(r["substeps"])),
+                    "cuts": int(float(r["cuts"]))})
+    return status, wall, rows
+
+
+def summary(rows, runs, strategies):
+    print(f"{'run':22s} {'strategy':9s} {'status':8s} {'levels':>6s} {'its':>6s} {'median':>6s} {'max':>5s} "
+          f"{'LU':>6s} {'seconds':>8s} {'phi_last':>9s} {'|Ps/P-1|':>9s} {'body F':>8s}")
+    for scene, label, ranks, _ in runs:
+        for s in strategies:
+            r = [x for x in rows if x["run"] == label and x["strategy"] == s]
+            st = status_of.get((label, s), "?")
+            if not r:
+                print(f"{label:22s} {s:9s} {st:8s} {0:6d}")
+                continue
+            its = sorted(x["newton_its"] for x in r)
+            med = its[len(its) // 2] if len(its) % 2 else 0.5 * (its[len(its) // 2 - 1] + its[len(its) // 2])
+            print(f"{label:22s} {s:9s} {st:8s} {len(r):6d} {sum(its):6d} {med:6.1f} {its[-1]:5d} "
+                  f"{sum(x['factorizations'] for x in r):6d} {sum(x['seconds'] for x in r):8.1f} {r[-1]['phi']:9.6f} "
+                  f"{max(abs(x['P_sigma_over_P'] - 1) for x in r):9.2e} {max(x['body_force_over_Pd'] for x in r):8.1e}")
+
+
+status_of = {}
+
+
+def plot(rows, runs, strategies, path, title):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(1, 2, figsize=(13, 5))
+    markers = {"anchored": "o", "newton": "s"}
+    labels = [label for _, label, _, _ in runs]
+    for s in strategies:
+        for i, label in enumerate(labels):
+            r = [x for x in rows if x["run"] == label and x["strategy"] == s]
+            ax[0].semilogx([x["P_over_E"] for x in r], [x["newton_its"] for x in r], marker=markers.get(s, "x"),
+                           color=f"C{i}", ls="-" if s == "newton" else ":", ms=4,
+                           label=f"{label} {s}" if len(labels) <= 10 else None)
+    ax[0].set_xlabel("P/E")
+    ax[0].set_ylabel("Newton iterations per level")
+    ax[0].set_yscale("log")
+    ax[0].legend(fontsize=6, ncol=2)
+    width = 0.8 / len(strategies)
+    for j, s in enumerate(strategies):
+        secs = [sum(x["seconds"] for x in rows if x["run"] == label and x["strategy"] == s) for label in labels]
+        bars = ax[1].bar([i + j * width for i in range(len(labels))], secs, width, label=s)
+        for b, label in zip(bars, labels):
+            if status_of.get((label, s)) != "ok":
+                ax[1].annotate(status_of.get((label, s), "?"), (b.get_x(), b.get_height()), fontsize=6, rotation=90)
+    ax[1].set_xticks([i + 0.4 - width / 2 for i in range(len(labels))])
+    ax[1].set_xticklabels(labels, rotation=45, ha="right", fontsize=7)
+    ax[1].set_ylabel("seconds (levels reached)")
+    ax[1].legend()
+    fig.suptitle(title, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", nargs="+", default=["default"])
+    ap.add_argument("--strategies", nargs="+", default=["anchored", "newton"])
+    ap.add_argument("--pressures", default="", help="P/E list for campaign50, large400, paper1500")
+    ap.add_argument("--ranks", type=int, default=2, help="MPI ranks of paper1500")
+    ap.add_argument("--jobs", type=int, default=1, help="simulations at a time")
+    ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
+    ap.add_argument("--exe", default=os.path.join(ROOT, "build", "bin", "compact"))
+    ap.add_argument("--mpiexec", default="mpiexec")
+    ap.add_argument("--extra", default="", help="extra compact options for every run")
+    ap.add_argument("--runs", default=os.path.join(ROOT, "out", "bench_solver"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "solver"))
+    a = ap.parse_args()
+    runs = scene_runs(a)
+    rows = []
+    jobs = [(scene, label, ranks, opts, s) for scene, label, ranks, opts in runs for s in a.strategies]
+    with cf.ThreadPoolExecutor(max_workers=a.jobs) as pool:
+        futs = {pool.submit(run_one, a, *j): j for j in jobs}
+        for f in cf.as_completed(futs):
+            scene, label, ranks, opts, s = futs[f]
+            status, wall, r = f.result()
+            status_of[(label, s)] = status
+            rows += r
+            print(f"  {label} {s}: {status}, {len(r)} levels, {sum(x['newton_its'] for x in r)} Newton its, "
+                  f"{wall:.0f} s", flush=True)
+    order = {label: i for i, (_, label, _, _) in enumerate(runs)}
+    rows.sort(key=lambda x: (order[x["run"]], a.strategies.index(x["strategy"]), x["P_over_E"]))
+    header = (f"# machine: {platform.node()}, {os.cpu_count()} cores, {cpu_name()}; commit {git_commit()}; "
+              f"{a.jobs} simulation(s) at a time\n# command: {' '.join(sys.argv)}\n")
+    os.makedirs(os.path.dirname(a.out) or ".", exist_ok=True)
+    with open(a.out + ".csv", "w", newline="") as f:
+        f.write(header)
+        fields = ["scene", "run", "strategy", "ranks", "status", "P_over_E", "newton_its", "factorizations", "seconds",
+                  "substeps", "cuts", "phi", "P_sigma_over_P", "body_force_over_Pd", "node_force_over_Pd",
+                  "max_penetration"]
+        w = csv.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.12g}" if isinstance(v, float) else v) for k, v in r.items()})
+    summary(rows, runs, a.strategies)
+    plot(rows, runs, a.strategies, a.out + ".png", header.replace("\n", "  ").replace("# ", ""))
+    print(f"wrote {a.out}.csv and {a.out}.png")
+
+
+if __name__ == "__main__":
+    main()
