@@ -10,7 +10,9 @@ static const char help[] =
     "released; -settle_frictionless); each level of -pressures (P/E) is reached quasistatically with\n"
     "automatic sub-stepping, each level being equilibrium of\n"
     "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
-    "solved by semismooth Newton in one PETSc SNES (MUMPS LU) inside pseudo-transient continuation.\n"
+    "solved by semismooth Newton (MUMPS LU) inside pseudo-transient continuation: -level_solver anchored\n"
+    "(default) solves every pseudo-time step to convergence, -level_solver newton takes one Newton step per\n"
+    "pseudo-time step, accepted by the residual of its proximal subproblem, and accepts a level per body.\n"
     "Deformable pairs meet through a mortar (cell-averaged) gap of the slave's boundary nodes against\n"
     "the master's contact curve (-contact_deformable mortar; nts and two_pass are node-to-segment).\n"
     "A level is accepted at exact equilibrium or by the paper's criterion: unbalanced forces\n"
@@ -27,7 +29,8 @@ static const char help[] =
     "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
     "each Newton iteration with the numbers of closed and sliding contacts, -newton_monitor_contacts\n"
     "the contacts whose state changed (to see an active-set cycle), -ptc_monitor each\n"
-    "pseudo-time step (residual by block, largest unbalanced force and where it acts); without it,\n"
+    "pseudo-time step (residual by block, largest unbalanced force and where it acts), -level_monitor each\n"
+    "trial step of -level_solver newton; without them,\n"
     "a sub-step that runs long prints a progress line every -progress_interval seconds (default 60).\n\n";
 
 #include <petscsnes.h>

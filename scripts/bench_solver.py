@@ -19,6 +19,8 @@ Outputs: <out>.csv (one row per level and run; '#' lines: machine, commit,
 command) and <out>.png (Newton iterations per level and seconds per run).
 --jobs 2 runs two simulations at a time: Newton iterations and
 factorizations are unaffected, seconds are then those of a shared machine.
+--baseline EXE adds the strategy "baseline": another compact binary (an
+earlier commit, built from a worktree) with its own default level solver.
 
 Usage:
   /usr/bin/python3 scripts/bench_solver.py --scenes default
@@ -32,6 +34,7 @@ import os
 import platform
 import subprocess
 import sys
+import textwrap
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -83,8 +86,9 @@ def scene_runs(a):
 def run_one(a, scene, label, ranks, opts, strategy):
     out = os.path.join(a.runs, f"{label}_{strategy}")
     os.makedirs(out, exist_ok=True)
+    exe, solver = (a.baseline, []) if strategy == "baseline" else (a.exe, ["-level_solver", strategy])
     cmd = ([a.mpiexec, "--allow-run-as-root", "-n", str(ranks)] if ranks > 1 else []) + \
-          [a.exe] + opts + ["-level_solver", strategy, "-output_dir", out, "-checkpoint", "false"] + a.extra.split()
+          [exe] + opts + solver + ["-output_dir", out, "-checkpoint", "false"] + a.extra.split()
     t0 = time.time()
     try:
         p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=a.timeout)
@@ -103,9 +107,10 @@ def run_one(a, scene, label, ranks, opts, strategy):
                 rows.append({
                     "scene": scene, "run": label, "strategy": strategy, "ranks": ranks, "status": status,
                     "P_over_E": P, "newton_its": int(float(r["newton_its"])),
-                    "factorizations": int(float(r["factorizations"])), "seconds": float(r["seconds"]),
+                    "factorizations": int(float(r.get("factorizations", r["newton_its"]))),
+                    "seconds": float(r["seconds"]),
                     "phi": float(r["phi"]), "P_sigma_over_P": float(r["P_sigma_over_E"]) / P,
-                    "body_force_over_Pd": float(r["body_force_over_Pd"]),
+                    "body_force_over_Pd": float(r.get("body_force_over_Pd", "nan")),
                     "node_force_over_Pd": float(r["force_residual_over_Pd"]),
                     "max_penetration": float(r["max_penetration"]), "substeps": int(float(r["substeps"])),
                     "cuts": int(float(r["cuts"]))})
@@ -126,7 +131,8 @@ def summary(rows, runs, strategies):
             med = its[len(its) // 2] if len(its) % 2 else 0.5 * (its[len(its) // 2 - 1] + its[len(its) // 2])
             print(f"{label:22s} {s:9s} {st:8s} {len(r):6d} {sum(its):6d} {med:6.1f} {its[-1]:5d} "
                   f"{sum(x['factorizations'] for x in r):6d} {sum(x['seconds'] for x in r):8.1f} {r[-1]['phi']:9.6f} "
-                  f"{max(abs(x['P_sigma_over_P'] - 1) for x in r):9.2e} {max(x['body_force_over_Pd'] for x in r):8.1e}")
+                  f"{max(abs(x['P_sigma_over_P'] - 1) for x in r):9.2e} "
+                  f"{max((x['body_force_over_Pd'] for x in r), key=lambda v: -1 if math.isnan(v) else v):8.1e}")
 
 
 status_of = {}
@@ -137,13 +143,13 @@ def plot(rows, runs, strategies, path, title):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(1, 2, figsize=(13, 5))
-    markers = {"anchored": "o", "newton": "s"}
+    markers = {"baseline": "^", "anchored": "o", "newton": "s"}
     labels = [label for _, label, _, _ in runs]
     for s in strategies:
         for i, label in enumerate(labels):
             r = [x for x in rows if x["run"] == label and x["strategy"] == s]
             ax[0].semilogx([x["P_over_E"] for x in r], [x["newton_its"] for x in r], marker=markers.get(s, "x"),
-                           color=f"C{i}", ls="-" if s == "newton" else ":", ms=4,
+                           color=f"C{i}", ls={"newton": "-", "anchored": ":"}.get(s, "--"), ms=4,
                            label=f"{label} {s}" if len(labels) <= 10 else None)
     ax[0].set_xlabel("P/E")
     ax[0].set_ylabel("Newton iterations per level")
@@ -160,7 +166,7 @@ def plot(rows, runs, strategies, path, title):
     ax[1].set_xticklabels(labels, rotation=45, ha="right", fontsize=7)
     ax[1].set_ylabel("seconds (levels reached)")
     ax[1].legend()
-    fig.suptitle(title, fontsize=8)
+    fig.suptitle("\n".join(textwrap.wrap(title, 160)), fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
@@ -174,11 +180,14 @@ def main():
     ap.add_argument("--jobs", type=int, default=1, help="simulations at a time")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
     ap.add_argument("--exe", default=os.path.join(ROOT, "build", "bin", "compact"))
+    ap.add_argument("--baseline", default="", help="compact binary of an earlier commit (strategy 'baseline')")
     ap.add_argument("--mpiexec", default="mpiexec")
     ap.add_argument("--extra", default="", help="extra compact options for every run")
     ap.add_argument("--runs", default=os.path.join(ROOT, "out", "bench_solver"))
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "solver"))
     a = ap.parse_args()
+    if a.baseline and "baseline" not in a.strategies:
+        a.strategies.insert(0, "baseline")
     runs = scene_runs(a)
     rows = []
     jobs = [(scene, label, ranks, opts, s) for scene, label, ranks, opts in runs for s in a.strategies]

@@ -146,6 +146,10 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
   const double atol = 1e-11 * p_.Parameters().young * dmean;
   const double detect_every = 0.4 * p_.Parameters().contact_margin * dmean;
   const double relaxed_tol = p_.Parameters().level_force_rtol, phi_tol = p_.Parameters().level_phi_rtol;
+  const double progress_interval = p_.Parameters().progress_interval;
+  PetscLogDouble t_start, t_progress;
+  PetscCall(PetscTime(&t_start));
+  t_progress = t_start;
   double fnorm, force, phi = 0.0, phi_before = 0.0;
   bool inverted;
   // The iterate z: its residual F(z), and phi for the level criterion.
@@ -237,6 +241,21 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
     if (report->newton_its >= prm_.max_its) {
       report->reason = SNES_DIVERGED_MAX_IT;
       break;
+    }
+    if (progress_interval >= 0.0 && !prm_.monitor) {
+      // A heartbeat for long load steps; rank 0's clock decides, so the ranks agree on whether to print.
+      PetscLogDouble now;
+      PetscCall(PetscTime(&now));
+      int due = now - t_progress >= progress_interval;
+      PetscCallMPI(MPI_Bcast(&due, 1, MPI_INT, 0, comm_));
+      if (due) {
+        t_progress = now;
+        PetscCall(PetscPrintf(comm_,
+                              "    ... P/E %.4g: %" PetscInt_FMT " Newton its, |F| %.2e, largest force %.2e P<d>, "
+                              "trust radius %.1e <d>, %.0f s in this load step\n",
+                              pressure / p_.Parameters().young, report->newton_its, fnorm,
+                              force / (std::max(pressure, 1e-300) * dmean), move, now - t_start));
+      }
     }
     // One linearization per iteration.
     PetscCall(p_.NewtonMatrix(z_, J_));

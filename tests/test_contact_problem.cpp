@@ -335,6 +335,71 @@ TEST(ContactProblem, ProximalTermIsRhoOnBodyAndWallDiagonal) {
   VecDestroy(&zv0);
 }
 
+// 1c. RotatedUpdate applies the mean rotation of a body's increment as a
+// finite rotation: an increment that is the linearized rotation by theta
+// about the centroid plus a translation t puts every node exactly at
+// c + t + R(theta)(x - c), so no element changes its area; a translation, and
+// every unknown that is not a node of a deformable body, is added as it is.
+TEST(ContactProblem, RotatedUpdateAppliesTheMeanRotationExactly) {
+  ProblemParameters params;
+  auto problem = MakeDisk(params, 24);
+  ASSERT_TRUE(problem);
+  double step = -1.0;
+  LoadTo(*problem, 0.05, &step);  // a deformed disk, multipliers nonzero
+  Vec z, d, zt;
+  ASSERT_PETSC(problem->CreateGlobalVector(&z));
+  ASSERT_PETSC(problem->PackState(z));
+  ASSERT_PETSC(VecDuplicate(z, &d));
+  ASSERT_PETSC(VecDuplicate(z, &zt));
+  const DeformableBody &body = problem->Bodies()[0];
+  const int nn = body.mesh.num_nodes();
+  PetscInt n;
+  ASSERT_PETSC(VecGetSize(z, &n));
+  std::vector<double> x(2 * nn);
+  double c[2] = {0, 0};
+  for (int a = 0; a < nn; ++a) {
+    problem->NodePosition(0, a, &x[2 * a]);
+    c[0] += x[2 * a] / nn, c[1] += x[2 * a + 1] / nn;
+  }
+  for (double theta : {0.0, 1e-3, 0.3, -1.2}) {
+    const double t[2] = {0.01, -0.02};
+    PetscScalar *da;
+    ASSERT_PETSC(VecGetArray(d, &da));
+    for (PetscInt i = 0; i < n; ++i) da[i] = 1e-3 * std::sin(1.0 + i);  // walls, multipliers: arbitrary
+    for (int a = 0; a < nn; ++a) {
+      const double r[2] = {x[2 * a] - c[0], x[2 * a + 1] - c[1]};
+      da[body.dof_offset + 2 * a] = t[0] - theta * r[1];
+      da[body.dof_offset + 2 * a + 1] = t[1] + theta * r[0];
+    }
+    ASSERT_PETSC(VecRestoreArray(d, &da));
+    ASSERT_PETSC(problem->RotatedUpdate(z, d, zt));
+    const PetscScalar *za, *zta, *db;
+    ASSERT_PETSC(VecGetArrayRead(z, &za));
+    ASSERT_PETSC(VecGetArrayRead(zt, &zta));
+    ASSERT_PETSC(VecGetArrayRead(d, &db));
+    double node_error = 0.0, other_error = 0.0;
+    for (int a = 0; a < nn; ++a) {
+      const double r[2] = {x[2 * a] - c[0], x[2 * a + 1] - c[1]};
+      const double expected[2] = {c[0] + t[0] + std::cos(theta) * r[0] - std::sin(theta) * r[1],
+                                  c[1] + t[1] + std::sin(theta) * r[0] + std::cos(theta) * r[1]};
+      for (int i = 0; i < 2; ++i) {
+        const PetscInt k = body.dof_offset + 2 * a + i;
+        const double moved = body.mesh.X[2 * a + i] + zta[k];  // centre of the body at the origin
+        node_error = std::max(node_error, std::abs(moved - expected[i]));
+      }
+    }
+    for (PetscInt i = 2 * nn; i < n; ++i) other_error = std::max(other_error, std::abs(zta[i] - (za[i] + db[i])));
+    ASSERT_PETSC(VecRestoreArrayRead(z, &za));
+    ASSERT_PETSC(VecRestoreArrayRead(zt, &zta));
+    ASSERT_PETSC(VecRestoreArrayRead(d, &db));
+    EXPECT_LT(node_error, 1e-13) << "theta " << theta;
+    EXPECT_EQ(other_error, 0.0) << "theta " << theta;
+  }
+  VecDestroy(&z);
+  VecDestroy(&d);
+  VecDestroy(&zt);
+}
+
 // 3. Conservation: no residual component along a rigid translation of everything.
 TEST(ContactProblem, ResidualHasNoRigidTranslationComponent) {
   ProblemParameters params;

@@ -273,7 +273,8 @@ TEST(CoulombLaw, SwitchMarginsOfChangedStates) {
 // Zero penetration, multiplier signs, complementarity and the Coulomb cone
 // in a random 20-disk mixture (kappa 0.5, friction 0.2), two levels, with
 // the deformable pairs' contact law `law`.
-void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb) {
+void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
+                                  LevelStrategy strategy = LevelStrategy::Anchored) {
   DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
   assign_deformable(packing, 0.5, 1);
   ProblemParameters p;
@@ -291,6 +292,7 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb) {
   ASSERT_GT(n_def, 0);
   ASSERT_GT(n_rigid, 0);
   LoadControlParameters load;
+  load.level.strategy = strategy;
   double step = -1.0;
   int level = 0;
   for (double P : {1e-4, 1e-3}) {
@@ -298,11 +300,25 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb) {
     LevelReport rep;
     ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
     EXPECT_LE(rep.force_residual, 1e-4 * P * problem.MeanDiameter());
+    if (strategy == LevelStrategy::Newton) {
+      // The newton strategy's level criterion is per body: net force and torque.
+      CompactionProblem::Balance b;
+      ASSERT_PETSC(problem.StateBalance(&b));
+      const double d = problem.MeanDiameter();
+      EXPECT_LE(b.body_force, 1e-4 * P * d);
+      EXPECT_LE(b.body_torque, 1e-4 * P * d * d);
+      EXPECT_NEAR(ComputeObservables(problem).mean_stress, P, 1e-4 * P) << "virial identity per body";
+    }
+    // anchored accepts with exact contact rows (the SNES tolerance); newton's
+    // per-body criterion holds them to 1e-4 P <d>, i.e. gaps of closed
+    // contacts to 1e-4 P <d> / c_n (c_n = E = 1 here).
+    const double gap_tol = strategy == LevelStrategy::Newton ? 1e-4 * P * problem.MeanDiameter() : 0.0;
     int frictional = 0, sliding = 0;
     for (const ContactForce &f : problem.ContactForces()) {
-      EXPECT_GE(f.gap, -1e-9 * problem.MeanDiameter()) << "penetration";
-      EXPECT_GE(f.normal_multiplier, -1e-10 * P) << "tensile contact force";
-      EXPECT_LE(std::abs(f.normal_multiplier * f.gap), 1e-10 * P) << "complementarity";
+      EXPECT_GE(f.gap, -1e-9 * problem.MeanDiameter() - gap_tol) << "penetration";
+      EXPECT_GE(f.normal_multiplier, -1e-10 * P - gap_tol) << "tensile contact force";
+      EXPECT_LE(std::abs(f.normal_multiplier * f.gap), 1e-10 * P + gap_tol * std::abs(f.normal_multiplier))
+          << "complementarity";
       // The contact rows hold to the SNES tolerance, 1e-11 E <d> (E = 1): a
       // sliding contact's lambda_t = mu (lambda_n - c_n g) with |c_n g| up to that.
       if (level > 1)
@@ -330,6 +346,12 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
 // the slave node's weighted gap) and no Fischer-Burmeister retry.
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionMortar) {
   CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE);
+}
+
+// The same with the newton level solver (one Newton step per pseudo-time
+// step), whose level criterion is per body.
+TEST(Mixture, RandomTwentyDiskMixtureWithFrictionNewton) {
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Newton);
 }
 
 // A 12-disk all-deformable packing (40-triangle disks) with two-pass
