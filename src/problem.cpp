@@ -68,8 +68,9 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsInt("-ptc_max_steps", "pseudo-time steps per sub-step before it counts as failed (the load step is then cut)",
                             "", ptc_max_steps, &ptc_max_steps, nullptr));
   PetscCall(PetscOptionsReal("-level_force_rtol",
-                             "accept a level when the largest unbalanced force is below this x P <d> and phi has settled "
-                             "(with -ptc_move; 0: only exact equilibrium, |R| below the absolute tolerance)",
+                             "accept a level by the paper's criterion besides exact equilibrium (0: only exact "
+                             "equilibrium): anchored, the largest nodal force below this x P <d>; newton, every body's net "
+                             "force and torque, nodal force and contact row below this x P <d> (<d>^2); phi settled",
                              "", level_force_rtol, &level_force_rtol, nullptr));
   PetscCall(PetscOptionsReal("-level_phi_rtol", "... and the packing fraction changed by less than this (relative) in the last pseudo-time step",
                              "", level_phi_rtol, &level_phi_rtol, nullptr));
