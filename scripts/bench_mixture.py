@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Skip-work and cost benchmark of the mixture driver (issue 3, item 10).
+"""Skip-work and cost benchmark of the mixture driver.
 
 For every (N_p, kappa, friction) of the grid, runs build/bin/compact on a few
 pressure levels and records per level: Newton iterations, pseudo-time steps,

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Strong and weak scaling of distributed compact runs, and linear-solver comparison (issue 4, items 3 and 6).
+"""Strong and weak scaling of distributed compact runs, and linear-solver comparison.
 
 Runs `<mpiexec> -n r <compact> ...` for every rank count r of --ranks:
   - strong scaling: the scene --n-particles N on every r;

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Validation campaign (issue 3, item 9): compact for kappa in {0.2, 0.5, 0.8, 1}
+"""Validation campaign: compact for kappa in {0.2, 0.5, 0.8, 1}
 and friction in {0, 0.2}, then the paper's fits per friction.
 
 Runs build/bin/compact (two at a time by default: one per core), writes each

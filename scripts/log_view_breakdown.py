@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Where the time of compact's Solve stage goes, from PETSc -log_view output (issue 4, plan for clusters).
+"""Where the time of compact's Solve stage goes, from PETSc -log_view output.
 
     /usr/bin/python3 scripts/log_view_breakdown.py --csv OUT.csv --png OUT.png LABEL=LOG [LABEL=LOG ...]
 

@@ -1638,7 +1638,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
       // ptc_retry_fb the retry uses Fischer-Burmeister, which is smooth
       // there, for the rest of the sub-step. (With the mortar law that made
       // the contact rows cycle at frozen geometry instead: compact turns it
-      // off, docs/validation.md, session 9.)
+      // off, docs/validation.md.)
       if (ptc && outer < max_outer && ++failures <= 8) {
         move *= 0.25;
         if (params_.ptc_retry_fb) ncp_now_ = NcpFunction::FischerBurmeister;
