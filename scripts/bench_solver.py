@@ -37,26 +37,10 @@ import sys
 import textwrap
 import time
 
+from bench_mixture import cpu_name, git_commit
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CAMPAIGN_PRESSURES = "1e-4,3e-4,1e-3,3e-3,0.01,0.02,0.05,0.1,0.15,0.2,0.25,0.3,0.4,0.5"
-
-
-def git_commit():
-    try:
-        return subprocess.check_output(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], text=True).strip()
-    except Exception:
-        return "unknown"
-
-
-def cpu_name():
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def scene_runs(a):

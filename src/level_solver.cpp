@@ -158,7 +158,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
     PetscCall(p_.AdoptState(z_));
     PetscCall(Evaluate(z_, F_, &fnorm, &force, &inverted));
     phi_before = phi;
-    if (relaxed_tol > 0.0) phi = p_.Summary().packing_fraction;
+    if (relaxed_tol > 0.0) phi = p_.PackingFraction();
     PetscFunctionReturn(0);
   };
   double move = prm_.initial_move;  // trust radius m, in <d>

@@ -1674,7 +1674,7 @@ PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
     // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
     double part[5];
     PetscCall(ResidualBlocks(r_, part));
-    const double phi = Summary().packing_fraction;
+    const double phi = PackingFraction();
     if (monitor_outer_) {
       PetscCall(PetscPrintf(comm_,
                             "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)  |F|_inf %.3e  phi %.7f  move %.2e  its %" PetscInt_FMT "%s\n",
@@ -1789,24 +1789,37 @@ std::vector<ContactForce> CompactionProblem::ContactForces() const {
   return out;
 }
 
-StateSummary CompactionProblem::Summary() const {
-  StateSummary s;
-  s.box_width = WallBox::width(w_);
-  s.box_height = WallBox::height(w_);
-  s.min_cell_area_ratio = std::numeric_limits<double>::infinity();
+// Particle areas of the current state: the deformable disks' current and
+// reference areas and smallest cell area ratio into s; returns the rigid disks' area.
+double CompactionProblem::Areas(StateSummary *s) const {
+  s->min_cell_area_ratio = std::numeric_limits<double>::infinity();
   for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) {
     const std::vector<double> ratio = CellAreaRatio(b);
     double area = 0.0;
     for (size_t e = 0; e < ratio.size(); ++e) {
       area += ratio[e] * bodies_[b].ref_cell_area[e];
-      s.min_cell_area_ratio = std::min(s.min_cell_area_ratio, ratio[e]);
+      s->min_cell_area_ratio = std::min(s->min_cell_area_ratio, ratio[e]);
     }
-    s.deformable_area += area;
-    s.ref_deformable_area += bodies_[b].ref_area;
+    s->deformable_area += area;
+    s->ref_deformable_area += bodies_[b].ref_area;
   }
-  if (bodies_.empty()) s.min_cell_area_ratio = 1.0;
+  if (bodies_.empty()) s->min_cell_area_ratio = 1.0;
   double rigid_area = 0.0;
   for (const RigidBody &r : rigid_) rigid_area += M_PI * r.radius * r.radius;
+  return rigid_area;
+}
+
+double CompactionProblem::PackingFraction() const {
+  StateSummary s;
+  const double rigid_area = Areas(&s);
+  return (s.deformable_area + rigid_area) / WallBox::area(w_);
+}
+
+StateSummary CompactionProblem::Summary() const {
+  StateSummary s;
+  s.box_width = WallBox::width(w_);
+  s.box_height = WallBox::height(w_);
+  const double rigid_area = Areas(&s);
   s.particle_area = s.deformable_area + rigid_area;
   s.ref_particle_area = s.ref_deformable_area + rigid_area;
   s.packing_fraction = s.particle_area / WallBox::area(w_);

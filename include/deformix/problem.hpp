@@ -351,6 +351,8 @@ class CompactionProblem {
   PetscErrorCode RestoreSnapshot(const Snapshot &s);
 
   StateSummary Summary() const;
+  // Summary().packing_fraction without the contact and penetration checks.
+  double PackingFraction() const;
   LayoutSizes Sizes();
   std::vector<ContactForce> ContactForces() const;
   const std::vector<DeformableBody> &Bodies() const { return bodies_; }
@@ -428,6 +430,7 @@ class CompactionProblem {
   PetscErrorCode Gather(Vec z, bool full);  // z -> zall_ (natural order): everything, or own + ghost unknowns
   PetscErrorCode Assemble(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
                           std::vector<PetscScalar> *cv, bool *inverted, std::vector<char> *active);
+  double Areas(StateSummary *s) const;  // see Summary
   void Unpack(const double *z);
   void Pack(double *z) const;
   PetscErrorCode UpdatePartition();  // METIS partition of the particles for the current candidates
