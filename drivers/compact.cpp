@@ -7,8 +7,8 @@ static const char help[] =
     "overlap); a fraction kappa of the particle area is turned deformable, homogeneously in space;\n"
     "it is settled into exact contact without friction at min(P_1, 1e-4 E) (with -constrain_rotation\n"
     "the deformable disks' mean rotation held by gauges), then friction is switched on (gauges\n"
-    "released; -settle_frictionless); each level of -pressures (P/E) is reached quasistatically with\n"
-    "automatic sub-stepping, each level being equilibrium of\n"
+    "released; -settle_frictionless); each level of -pressures (P/E) is reached quasistatically in one\n"
+    "sub-step, halved while its solve fails (-load_step_policy), each level being equilibrium of\n"
     "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
     "solved by semismooth Newton (MUMPS LU) inside pseudo-transient continuation: -level_solver anchored\n"
     "(default) solves every pseudo-time step to convergence, -level_solver newton takes one Newton step per\n"
@@ -21,7 +21,7 @@ static const char help[] =
     "level), <output_dir>/packing.csv (the initial packing) and <output_dir>/checkpoint.h5 (after\n"
     "every level: what -restart needs to continue the run exactly where it stopped).\n\n"
     "Examples:\n"
-    "  build/bin/compact -options_file petsc-options/default.opts     (20 disks, about a minute)\n"
+    "  build/bin/compact -options_file petsc-options/default.opts     (20 disks, a few seconds)\n"
     "  build/bin/compact -n_particles 64 -kappa 0.5 -friction 0.2 -pressures 1e-4,1e-3 -output_dir out/c64\n"
     "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8   (1500 disks: not yet practical)\n"
     "  build/bin/compact -options_file petsc-options/default.opts -pressures 1e-4,1e-3,3e-3,0.01,0.02,0.03,0.05 \\\n"
@@ -162,7 +162,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   // step: Newton then cycles between stick, slip and open on a few contacts.
   // Measured (50 disks to P/E = 0.5, friction 0.2): kappa 0.5 in 109 s
   // instead of 243 s, kappa 1 in 183 s instead of 392 s; 100 disks, first two
-  // levels: 588 Newton iterations instead of 1108 (docs/validation.md).
+  // levels: 588 Newton iterations instead of 1108.
   params.ncp_scale = 0.01;
   // Deformable pairs: the mortar (cell-averaged) gap, so that no point of the
   // slave boundary is left unchecked (node-to-segment one way lets the

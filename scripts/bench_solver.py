@@ -5,8 +5,10 @@ Runs build/bin/compact once per (scene, strategy) and records per pressure
 level: Newton iterations (linearizations), numeric factorizations, seconds,
 phi, P_sigma/P, the largest net force on a body and the largest nodal force
 (both / P <d>), and the deepest penetration. Every run of a scene uses the
-same options except -level_solver, so the rows compare the strategies on
-the same packing and load path.
+same options except -level_solver (and -load_step_policy), so the rows
+compare the strategies on the same packing and load path. A strategy is
+SOLVER (compact's default sub-stepping) or SOLVER/POLICY, e.g.
+anchored/adaptive = -level_solver anchored -load_step_policy adaptive.
 
 Scenes (--scenes):
   default     petsc-options/default.opts (20 disks, kappa 0.5, friction 0.2)
@@ -25,6 +27,7 @@ earlier commit, built from a worktree) with its own default level solver.
 Usage:
   /usr/bin/python3 scripts/bench_solver.py --scenes default
   /usr/bin/python3 scripts/bench_solver.py --scenes default campaign50 --pressures 1e-4,3e-4,1e-3,3e-3,0.01,0.02,0.05 --jobs 2
+  /usr/bin/python3 scripts/bench_solver.py --strategies anchored/whole anchored/adaptive newton/whole newton/adaptive
 """
 import argparse
 import concurrent.futures as cf
@@ -68,9 +71,13 @@ def scene_runs(a):
 
 
 def run_one(a, scene, label, ranks, opts, strategy):
-    out = os.path.join(a.runs, f"{label}_{strategy}")
+    out = os.path.join(a.runs, f"{label}_{strategy.replace('/', '_')}")
     os.makedirs(out, exist_ok=True)
-    exe, solver = (a.baseline, []) if strategy == "baseline" else (a.exe, ["-level_solver", strategy])
+    if strategy == "baseline":
+        exe, solver = a.baseline, []
+    else:  # SOLVER or SOLVER/POLICY: -level_solver SOLVER [-load_step_policy POLICY]
+        name, _, policy = strategy.partition("/")
+        exe, solver = a.exe, ["-level_solver", name] + (["-load_step_policy", policy] if policy else [])
     cmd = ([a.mpiexec, "--allow-run-as-root", "-n", str(ranks)] if ranks > 1 else []) + \
           [exe] + opts + solver + ["-output_dir", out, "-checkpoint", "false"] + a.extra.split()
     t0 = time.time()

@@ -7,15 +7,23 @@ namespace deformix {
 
 PetscErrorCode LoadControlParameters::SetFromOptions(MPI_Comm comm) {
   PetscFunctionBeginUser;
+  PetscInt choice = static_cast<PetscInt>(policy);
+  const char *const names[] = {"whole", "adaptive"};  // LoadStepPolicy order
   PetscOptionsBegin(comm, nullptr, "Quasistatic load control", "deformix");
+  PetscCall(PetscOptionsEList("-load_step_policy",
+                              "length of a sub-step: whole (the rest of the level; halved after a failed solve) or "
+                              "adaptive (carried between sub-steps and levels, grown after easy sub-steps: "
+                              "-load_easy_its, -load_growth)",
+                              "", names, 2, names[choice], &choice, nullptr));
   PetscCall(PetscOptionsInt("-load_max_cuts", "consecutive step halvings allowed before a level is declared failed", "", max_cuts, &max_cuts,
                             nullptr));
-  PetscCall(PetscOptionsInt("-load_easy_its", "grow the step after sub-steps with at most this many Newton iterations",
+  PetscCall(PetscOptionsInt("-load_easy_its", "adaptive: grow the step after sub-steps with at most this many Newton iterations",
                             "", easy_its, &easy_its, nullptr));
-  PetscCall(PetscOptionsReal("-load_growth", "step growth factor after an easy sub-step", "", growth, &growth, nullptr));
+  PetscCall(PetscOptionsReal("-load_growth", "adaptive: step growth factor after an easy sub-step", "", growth, &growth, nullptr));
   PetscCall(PetscOptionsBool("-load_monitor", "print one line per sub-step (pressure, Newton iterations, pseudo-time steps)",
                              "", monitor, &monitor, nullptr));
   PetscOptionsEnd();
+  policy = static_cast<LoadStepPolicy>(choice);
   PetscCall(level.SetFromOptions(comm));
   PetscCheck(max_cuts >= 0, comm, PETSC_ERR_USER_INPUT, "-load_max_cuts must be >= 0");
   PetscCheck(growth >= 1.0, comm, PETSC_ERR_USER_INPUT, "-load_growth %g must be >= 1", growth);
@@ -31,7 +39,8 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
   report->pressure = target;
   double P = problem.Pressure();
   const double jump = std::abs(target - P);
-  double dP = (*step > 0.0) ? std::min(*step, jump) : jump;
+  const bool whole = params.policy == LoadStepPolicy::Whole;
+  double dP = (*step > 0.0 && !whole) ? std::min(*step, jump) : jump;
   // Pressures closer than this to the target count as the target.
   const double snap = 1e-12 * std::max(std::abs(target), 1e-300);
   int cuts_in_a_row = 0;
@@ -56,8 +65,9 @@ PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlPa
       report->relaxed_substeps += solve.relaxed;
       ++report->substeps;
       cuts_in_a_row = 0;
+      if (whole) dP = std::abs(target - P);
       // Easy: few Newton iterations per inner solve (pseudo-transient steps count separately).
-      if (solve.newton_its <= params.easy_its * std::max(1, solve.inner_solves)) dP = inc * params.growth;
+      else if (solve.newton_its <= params.easy_its * std::max(1, solve.inner_solves)) dP = inc * params.growth;
       else dP = inc;
     } else {
       ++report->cuts;

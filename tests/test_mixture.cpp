@@ -14,6 +14,8 @@
 //  4. Kernel: the Coulomb NCP function's stick, slip and open branches.
 //  5. A random 20-disk mixture with friction (the compact driver's scene):
 //     Signorini, Coulomb, level criterion and virial check.
+//  6. A rearrangement: a rigid rattler in the pore of four deformable disks
+//     is caught when the pore closes, and ends in exact equilibrium.
 #include <gtest/gtest.h>
 #include <petscsnes.h>
 
@@ -352,6 +354,68 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionMortar) {
 // step), whose level criterion is per body.
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionNewton) {
   CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Newton);
+}
+
+// A level that crosses a rearrangement: a rigid disk (radius 0.19) sits
+// off-centre in the pore of a 2 x 2 square arrangement of deformable disks
+// of diameter 1 (pore radius (sqrt 2 - 1) / 2 = 0.207), frictionless, with
+// compact's mortar contact. At P/E = 1e-3 it is a rattler: no force, its
+// unknowns a singular mode of the tangent. On the way to 0.05 (one jump) the
+// nearly incompressible disks flatten against each other and bulge into the
+// pore, which closes (between P/E 0.01 and 0.02), and the rattler is pushed
+// to where the disks around it balance it. Asserted: the equilibrium it
+// reaches (Signorini, the virial identity, the rattler's net force, a load
+// carried by several contacts), the same with both level solvers; not how
+// many iterations it takes.
+TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
+  double carried_by[2] = {0.0, 0.0};
+  for (LevelStrategy strategy : {LevelStrategy::Anchored, LevelStrategy::Newton}) {
+    ProblemParameters p;
+    p.deformable_contact = DeformableContact::Mortar;
+    p.constrain_rotation = PETSC_TRUE;
+    p.ptc_move = 0.02;
+    CompactionProblem problem(PETSC_COMM_WORLD);
+    ASSERT_PETSC(problem.SetParameters(p));
+    const DiskMesh mesh = make_disk_mesh(0.5, 40, 2);
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) problem.AddDeformableBody(mesh, i + 0.5, j + 0.5);
+    problem.AddRigidBody(1.01, 1.004, 0.19);
+    const int rattler = problem.NumParticles() - 1;  // its particle index
+    const double w[4] = {0.0, 2.0, 0.0, 2.0};
+    problem.SetWalls(w);
+    LoadControlParameters load;
+    load.level.strategy = strategy;
+    double step = -1.0;
+    const char *label = strategy == LevelStrategy::Anchored ? "anchored" : "newton";
+    for (double P : {1e-3, 0.05}) {
+      LevelReport rep;
+      ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
+      double net[2] = {0.0, 0.0}, carried = 0.0;
+      int touching = 0;  // contacts of the rattler carrying more than round-off
+      for (const ContactForce &f : problem.ContactForces()) {
+        const int sign = f.slave_particle == rattler ? 1 : f.master_particle == rattler ? -1 : 0;
+        if (sign == 0) continue;
+        net[0] += sign * f.force[0], net[1] += sign * f.force[1];
+        const double magnitude = std::hypot(f.force[0], f.force[1]);
+        carried += magnitude;
+        touching += magnitude > 1e-9 * P;
+      }
+      std::printf("  %s, P/E = %g: %" PetscInt_FMT " Newton its, %d sub-steps; the rattler carries %.4e P d on %d contacts, net %.1e P d\n",
+                  label, P, rep.newton_its, rep.substeps, carried / P, touching, std::hypot(net[0], net[1]) / P);
+      if (P < 0.01) {
+        EXPECT_LE(carried, 1e-9 * P) << label << ": the pore is still open at P/E = " << P;
+      } else {
+        // Caught: held by several contacts with forces of the order of the
+        // packing's contact forces (P d), and balanced.
+        EXPECT_GE(touching, 2) << label;
+        EXPECT_GT(carried, 0.1 * P) << label;
+        EXPECT_LE(std::hypot(net[0], net[1]), 1e-9 * carried) << label << ": net force on the rattler";
+        carried_by[strategy == LevelStrategy::Anchored ? 0 : 1] = carried;
+      }
+      CheckSignoriniCoulomb(problem, P, label);
+    }
+  }
+  EXPECT_NEAR(carried_by[1], carried_by[0], 1e-6 * carried_by[0]) << "both level solvers reach the same equilibrium";
 }
 
 // A 12-disk all-deformable packing (40-triangle disks) with two-pass

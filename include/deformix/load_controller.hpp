@@ -1,22 +1,30 @@
 // Quasistatic load control with automatic sub-stepping.
 //
 // A pressure level P_target is reached from the current pressure through
-// sub-steps: each sub-step solves exact equilibrium at an intermediate
-// pressure. A sub-step whose Newton solve fails (divergence, maximum
-// iterations, an inverted element reported as a domain error) is discarded,
-// the state restored and the step halved; a step that converged in few
-// Newton iterations lets the next one grow. The suggested step is carried
-// from level to level.
+// sub-steps: each sub-step solves equilibrium at an intermediate pressure.
+// A sub-step whose solve fails (divergence, iteration limit, an inverted
+// element reported as a domain error) is discarded, the state restored and
+// the step halved. How long the next sub-step is (-load_step_policy):
+//   whole     (default) every sub-step goes for the whole rest of the level:
+//             a level is one sub-step unless a solve fails;
+//   adaptive  the step is carried from sub-step to sub-step and from level
+//             to level, and grows by -load_growth after a sub-step that took
+//             at most -load_easy_its Newton iterations per inner solve.
+// Which one wins is measured in docs/level-solver.md: whole for
+// -level_solver anchored on every scene measured, adaptive for newton.
 #pragma once
 #include "deformix/level_solver.hpp"
 #include "deformix/problem.hpp"
 
 namespace deformix {
 
+enum class LoadStepPolicy : int { Whole = 0, Adaptive = 1 };
+
 struct LoadControlParameters {
+  LoadStepPolicy policy = LoadStepPolicy::Whole;
   PetscInt max_cuts = 16;    // give up after this many halvings in a row (smallest step: jump / 2^max_cuts)
-  PetscInt easy_its = 8;     // grow the step after a sub-step that took at most this many Newton iterations (per inner solve)
-  double growth = 2.0;       // step growth factor
+  PetscInt easy_its = 8;     // adaptive: grow the step after a sub-step that took at most this many Newton iterations (per inner solve)
+  double growth = 2.0;       // adaptive: step growth factor
   PetscBool monitor = PETSC_FALSE;  // one line per sub-step (-load_monitor)
   LevelSolverParameters level;      // how each sub-step is solved (-level_*)
   PetscErrorCode SetFromOptions(MPI_Comm comm);
@@ -37,7 +45,8 @@ struct LevelReport {
 };
 
 // Brings `problem` from its current pressure to `target`. `step` is the
-// suggested pressure increment (<= 0: try the whole jump); it is updated.
+// suggested pressure increment (<= 0: try the whole jump); it is updated
+// (the adaptive policy reads it, the whole policy only records it).
 PetscErrorCode AdvanceToPressure(CompactionProblem &problem, const LoadControlParameters &params, double target,
                                  double *step, LevelReport *report);
 
