@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <vector>
 
 namespace deformix {
 
@@ -27,6 +29,18 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "radius, shift, step fraction and length, accepted or rejected, closed and sliding contacts, "
                              "residual by block) and the level criterion's balances",
                              "", monitor, &monitor, nullptr));
+  PetscCall(PetscOptionsBool("-ptc_monitor",
+                             "anchored: one line per pseudo-time step (residual by block, largest unbalanced force "
+                             "and where it acts, phi, move)",
+                             "", ptc_monitor, &ptc_monitor, nullptr));
+  PetscCall(PetscOptionsBool("-newton_monitor",
+                             "anchored: one line per Newton iteration (|R|, closed and sliding contacts, rho_a, "
+                             "largest update and its unknown)",
+                             "", newton_monitor, &newton_monitor, nullptr));
+  PetscCall(PetscOptionsBool("-newton_monitor_contacts",
+                             "anchored: every contact whose state changed in the last Newton iteration (to see an "
+                             "active-set cycle)",
+                             "", newton_monitor_contacts, &newton_monitor_contacts, nullptr));
   PetscOptionsEnd();
   strategy = static_cast<LevelStrategy>(choice);
   PetscCheck(max_its >= 1, comm, PETSC_ERR_USER_INPUT, "-level_max_its %" PetscInt_FMT " must be >= 1", max_its);
@@ -375,13 +389,441 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
   PetscFunctionReturn(0);
 }
 
+// ---------------------------------------------------------------------------
+// anchored: pseudo-transient continuation, each pseudo-time step solved to
+// convergence by SNESNEWTONLS (level_solver.hpp). The SNES callbacks below
+// work on this small context; the problem provides the residual (with the
+// anchor term of SetAnchor), the Newton matrix and the contact states.
+class AnchoredContinuation {
+ public:
+  AnchoredContinuation(CompactionProblem &problem, const LevelSolverParameters &params) : p_(problem), prm_(params) {}
+  ~AnchoredContinuation() { Destroy(); }
+  PetscErrorCode Solve(double pressure, SolveReport *report);
+
+ private:
+  PetscErrorCode Attach();  // the problem's layout, and an SNES for it
+  PetscErrorCode Destroy();
+  static PetscErrorCode Function(SNES snes, Vec z, Vec F, void *ctx);
+  static PetscErrorCode Jacobian(SNES, Vec z, Mat J, Mat, void *ctx);
+  static PetscErrorCode Converged(SNES snes, PetscInt it, PetscReal, PetscReal snorm, PetscReal fnorm,
+                                  SNESConvergedReason *reason, void *ctx);
+  static PetscErrorCode Monitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx);
+  static PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *ctx);
+  static PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *changed_Y, PetscBool *changed_W,
+                                  void *ctx);
+
+  CompactionProblem &p_;
+  const LevelSolverParameters &prm_;
+  SNES snes_ = nullptr;
+  Vec z_ = nullptr, F_ = nullptr;  // the problem's (layout) vectors
+  Mat J_ = nullptr;
+  KSP ksp_ = nullptr;
+  Vec sqrt_weight_ = nullptr, work_ = nullptr, step_ = nullptr, floor_ = nullptr;
+  int layouts_ = -1;
+  MPI_Comm comm_ = MPI_COMM_NULL;
+  std::vector<char> checked_;               // contact states at the last convergence test
+  std::vector<char> monitor_states_;        // contact states at the last monitored iterate
+  std::vector<std::uint64_t> history_;      // hashes of the contact states of the last Newton iterates (LimitStep)
+  bool backtrack_ = false;                  // LimitStep found an active-set cycle: Backtrack this step
+  double fnorm0_ = 0.0;
+};
+
+PetscErrorCode AnchoredContinuation::Destroy() {
+  PetscFunctionBeginUser;
+  PetscCall(SNESDestroy(&snes_));
+  PetscCall(VecDestroy(&sqrt_weight_));
+  PetscCall(VecDestroy(&work_));
+  PetscCall(VecDestroy(&step_));
+  PetscCall(VecDestroy(&floor_));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode AnchoredContinuation::Attach() {
+  PetscFunctionBeginUser;
+  PetscCall(p_.Layout(&z_, &F_, &J_, &ksp_));  // packs the state into z_
+  if (layouts_ == p_.LayoutsCreated() && snes_) PetscFunctionReturn(0);
+  layouts_ = p_.LayoutsCreated();
+  PetscCall(Destroy());
+  PetscCall(PetscObjectGetComm((PetscObject)z_, &comm_));
+  PetscCall(VecDuplicate(z_, &sqrt_weight_));
+  PetscCall(VecDuplicate(z_, &work_));
+  PetscCall(VecDuplicate(z_, &step_));
+  PetscCall(VecDuplicate(z_, &floor_));
+  PetscCall(p_.ShiftDiagonals(floor_, sqrt_weight_));
+  PetscCall(VecSqrtAbs(sqrt_weight_));
+  const ProblemParameters &pp = p_.Parameters();
+  PetscCall(SNESCreate(comm_, &snes_));
+  PetscCall(SNESSetType(snes_, SNESNEWTONLS));
+  PetscCall(SNESSetKSP(snes_, ksp_));
+  PetscCall(SNESSetFunction(snes_, F_, Function, this));
+  PetscCall(SNESSetJacobian(snes_, J_, J_, Jacobian, this));
+  PetscCall(SNESSetConvergenceTest(snes_, Converged, this, nullptr));
+  // Forces are per unit thickness, in units of E * d; the tolerance is absolute in those units.
+  // With pseudo-transient continuation a stalled inner solve (active-set or
+  // slip-direction cycling) is better cut short: the outer loop then retries
+  // with more damping.
+  const PetscInt max_it = pp.ptc_move > 0.0 ? 15 : 50;
+  PetscCall(SNESSetTolerances(snes_, 1e-11 * pp.young * p_.MeanDiameter(), 1e-30, 0.0, max_it, -1));
+  SNESLineSearch ls;
+  PetscCall(SNESGetLineSearch(snes_, &ls));
+  PetscCall(SNESLineSearchSetType(ls, SNESLINESEARCHBT));
+  PetscCall(SNESSetFromOptions(snes_));
+  if (prm_.newton_monitor || prm_.newton_monitor_contacts) PetscCall(SNESMonitorSet(snes_, Monitor, this, nullptr));
+  PetscCall(SNESGetLineSearch(snes_, &ls));
+  PetscCall(SNESLineSearchSetPreCheck(ls, LimitStep, this));
+  PetscCall(SNESLineSearchSetPostCheck(ls, Backtrack, this));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode AnchoredContinuation::Function(SNES snes, Vec z, Vec F, void *ctx) {
+  auto *a = static_cast<AnchoredContinuation *>(ctx);
+  PetscFunctionBeginUser;
+  PetscCall(a->p_.Residual(z, F));
+  if (a->p_.Inverted() && snes) PetscCall(SNESSetFunctionDomainError(snes));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode AnchoredContinuation::Jacobian(SNES, Vec z, Mat J, Mat, void *ctx) {
+  auto *a = static_cast<AnchoredContinuation *>(ctx);
+  PetscFunctionBeginUser;
+  PetscCall(a->p_.NewtonMatrix(z, J));
+  PetscFunctionReturn(0);
+}
+
+// Converged only when the residual is small and the contact states are stable.
+PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal, PetscReal snorm, PetscReal fnorm,
+                                               SNESConvergedReason *reason, void *ctx) {
+  auto *a = static_cast<AnchoredContinuation *>(ctx);
+  PetscReal atol, rtol, stol;
+  PetscInt maxit, maxf;
+  PetscFunctionBeginUser;
+  PetscCall(SNESGetTolerances(snes, &atol, &rtol, &stol, &maxit, &maxf));
+  // How far from its switch is the most decided of the contacts that changed
+  // state since the last test (0: none changed). The contact states are
+  // reduced over the ranks by the residual, so every rank agrees.
+  const std::vector<char> &now = a->p_.ActiveSet();
+  const bool changed_any = now != a->checked_;
+  double changed_margin = 0.0;
+  PetscCall(a->p_.ChangedStateMargin(a->checked_, &changed_margin));
+  a->checked_ = now;
+  *reason = SNES_CONVERGED_ITERATING;
+  if (it == 0) a->fnorm0_ = fnorm;
+  if (PetscIsInfOrNanReal(fnorm)) {
+    *reason = SNES_DIVERGED_FNORM_NAN;
+  } else if (fnorm <= std::max<PetscReal>(atol, rtol * a->fnorm0_) &&
+             (it == 0 || !changed_any || snorm <= 1e-12 * a->p_.MeanDiameter() ||
+              changed_margin <= kDegenerateSwitch * atol)) {
+    // A contact state may still flip at a converged point when the contact
+    // is degenerate (lambda_n = g = 0 to round-off, e.g. a rattler resting
+    // on a neighbour, or |lambda_t| = mu lambda_n with no slip): both
+    // linearizations hold there, and the residual, which uses the exact NCP
+    // functions, is already zero. Such flips are accepted when every contact
+    // that changed is within kDegenerateSwitch atol of its switch. Two-pass
+    // deformable contact makes them common: the two passes of a conforming
+    // contact share its force in an indeterminate way, and each Newton step
+    // moves the share, flipping weakly loaded nodes (lambda_n ~ 1e-10 E<d>)
+    // between open, stick and slip forever.
+    *reason = SNES_CONVERGED_FNORM_ABS;
+  } else if (it >= maxit) {
+    *reason = SNES_DIVERGED_MAX_IT;
+  } else if (a->p_.AnchorWeight() > 0.0 && it >= a->p_.Parameters().ptc_stall_its && fnorm > 0.5 * a->fnorm0_) {
+    // Inside pseudo-transient continuation a converging inner solve has at
+    // least halved its residual after ptc_stall_its (6) iterations (measured
+    // at 20-100 disks: they converge in 2-7); one that has not is cycling (contact states or slip
+    // directions) and is cut short: the outer loop retries with more damping.
+    *reason = SNES_DIVERGED_DTOL;
+  }
+  PetscFunctionReturn(0);
+}
+
+// -newton_monitor: one line per Newton iteration; -newton_monitor_contacts:
+// every contact whose state changed in the last iteration (the contacts of
+// an active-set cycle), with its multipliers, gap and slip at the new iterate.
+PetscErrorCode AnchoredContinuation::Monitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx) {
+  auto *a = static_cast<AnchoredContinuation *>(ctx);
+  int closed = 0, sliding = 0;
+  PetscFunctionBeginUser;
+  for (char s : a->p_.ActiveSet()) closed += s == kClosed, sliding += s == kSliding;
+  // Largest entry of the last Newton update and the kind of unknown it belongs to.
+  char where[96] = "";
+  if (it > 0) {
+    Vec dz;
+    PetscInt imax, imin;
+    PetscReal dmax, dmin;
+    PetscCall(SNESGetSolutionUpdate(snes, &dz));
+    PetscCall(VecMax(dz, &imax, &dmax));
+    PetscCall(VecMin(dz, &imin, &dmin));
+    if (-dmin > dmax) dmax = -dmin, imax = imin;
+    const PetscInt natural = a->p_.NaturalIndex(imax);
+    PetscCall(PetscSNPrintf(where, sizeof(where), "  max|dz| %.2e (%s)", (double)dmax,
+                            a->p_.DescribeUnknown(natural).c_str()));
+  }
+  PetscCall(PetscPrintf(a->comm_, "    newton %2" PetscInt_FMT "  |R| %.3e  closed contacts %d  sliding %d  rho_a %.1e%s\n",
+                        it, (double)fnorm, closed, sliding, a->p_.AnchorWeight(), where));
+  if (a->prm_.newton_monitor_contacts) {
+    PetscCall(a->p_.PrintChangedContacts(a->monitor_states_));
+    a->monitor_states_ = a->p_.ActiveSet();
+  }
+  PetscFunctionReturn(0);
+}
+
+// Line-search pre-check: a Newton step that would move a body (or a wall)
+// by more than newton_max_move <d> is scaled down as a whole. Far from
+// equilibrium the linearized contact geometry is valid only over a fraction
+// of a diameter; near equilibrium steps are tiny and untouched, so the
+// quadratic rate is kept. (PETSc subtracts the step: x_new = x - y.)
+PetscErrorCode AnchoredContinuation::LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *ctx) {
+  auto *a = static_cast<AnchoredContinuation *>(ctx);
+  PetscFunctionBeginUser;
+  *changed = PETSC_FALSE;
+  // Active-set cycles: semismooth Newton can alternate between contact states
+  // (typically stick <-> slip of a contact on the edge of its cone), each
+  // linearization sending the iterate into the other's region. When the
+  // state at the current iterate repeats one of two or three iterations ago
+  // (and is not the last one), the step is halved, which lands between the
+  // two regions and breaks the cycle. States are compared on all ranks.
+  {
+    std::uint64_t h = 1469598103934665603ull;  // FNV-1a of the contact states
+    for (char s : a->p_.ActiveSet()) h = (h ^ static_cast<unsigned char>(s)) * 1099511628211ull;
+    std::vector<std::uint64_t> &hist = a->history_;
+    bool cycle = false;
+    for (size_t k = 2; k <= 3 && k <= hist.size(); ++k)
+      if (hist[hist.size() - k] == h && hist.back() != h) cycle = true;
+    hist.push_back(h);
+    if (hist.size() > 4) hist.erase(hist.begin());
+    a->backtrack_ = cycle;  // the post-check (Backtrack) makes this step decrease |R|
+  }
+  const double cap = a->p_.Parameters().newton_max_move * a->p_.MeanDiameter();
+  if (cap <= 0.0) PetscFunctionReturn(0);
+  {
+    double alpha;
+    PetscCall(VecScale(Y, -1.0));  // the update is -Y
+    PetscCall(a->p_.ContactStepFraction(Y, &alpha));
+    PetscCall(VecScale(Y, -alpha));
+    *changed = alpha < 1.0 ? PETSC_TRUE : PETSC_FALSE;
+  }
+  // Largest move of a body or wall unknown (rigid rotations times the radius).
+  double m;
+  PetscCall(VecPointwiseMult(a->work_, Y, a->sqrt_weight_));
+  PetscCall(VecNorm(a->work_, NORM_INFINITY, &m));
+  if (m > cap) {
+    PetscCall(VecScale(Y, cap / m));
+    *changed = PETSC_TRUE;
+  }
+  PetscFunctionReturn(0);
+}
+
+// Line-search post-check. The trial point W = X - lambda Y becomes
+// RotatedUpdate(X, -lambda Y): each deformable body's mean rotation is applied
+// as a finite rotation (a linearized rotation of a nearly incompressible disk
+// changes its area, see RotatedUpdate). After an active-set cycle was
+// detected (LimitStep), the step is backtracked, alpha = 1, 1/2, ..., 1/64,
+// until |R| decreases (Armijo with the Newton slope -|R|^2, sigma = 1e-4); if
+// no fraction decreases it, the one with the smallest |R| is taken. Plain
+// semismooth Newton is non-monotone (a change of the active set may raise
+// |R| for one step), so this monotone safeguard is only used on cycles,
+// which it breaks: a cycle returns |R| to a value it had before.
+PetscErrorCode AnchoredContinuation::Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *changed_Y,
+                                               PetscBool *changed_W, void *ctx) {
+  auto *a = static_cast<AnchoredContinuation *>(ctx);
+  PetscReal xnorm, fnorm, ynorm, lambda;
+  PetscFunctionBeginUser;
+  *changed_Y = PETSC_FALSE;
+  PetscCall(SNESLineSearchGetLambda(ls, &lambda));  // W = X - lambda Y (1 for the basic line search)
+  const auto trial = [&](double alpha) -> PetscErrorCode {
+    PetscFunctionBeginUser;
+    PetscCall(VecAXPBY(a->step_, -alpha * lambda, 0.0, Y));
+    PetscCall(a->p_.RotatedUpdate(X, a->step_, W));
+    PetscFunctionReturn(0);
+  };
+  PetscCall(trial(1.0));
+  *changed_W = PETSC_TRUE;
+  if (!a->backtrack_) PetscFunctionReturn(0);
+  a->backtrack_ = false;
+  PetscCall(SNESLineSearchGetNorms(ls, &xnorm, &fnorm, &ynorm));
+  double best_alpha = 1.0, best_norm = INFINITY;
+  for (double alpha = 1.0; alpha >= 1.0 / 64; alpha *= 0.5) {
+    PetscCall(trial(alpha));
+    PetscCall(a->p_.Residual(W, a->work_));
+    PetscReal norm;
+    PetscCall(VecNorm(a->work_, NORM_2, &norm));
+    if (a->p_.Inverted()) norm = INFINITY;
+    if (norm < best_norm) best_norm = norm, best_alpha = alpha;
+    if (norm <= (1.0 - 1e-4 * alpha) * fnorm) break;
+  }
+  PetscCall(trial(best_alpha));
+  if (best_alpha < 1.0) {
+    PetscCall(VecScale(Y, best_alpha));
+    *changed_Y = PETSC_TRUE;
+  }
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report) {
+  PetscFunctionBeginUser;
+  *report = SolveReport();
+  PetscCall(p_.BeginLoadStep(pressure));
+  // Pseudo-transient continuation (-ptc_move > 0). The equations get the term
+  // rho_a D (z - z_a), z_a the state at the start of the inner solve: each
+  // SNES solve is an implicit step of an overdamped dynamics in which
+  // rattlers, free rotations and sliding particles move a bounded distance.
+  // rho_a = |F|_inf / (m <d>), F the force residual without the term: an
+  // unbalanced force moves a body by at most about m <d> per step (so the
+  // linearized contact geometry stays valid), and rho_a vanishes with the
+  // residual, so the steps grow to plain Newton steps near equilibrium
+  // (switched evolution relaxation). m doubles after an easy inner solve and
+  // is divided by 4 after a failed one. The level is converged when the
+  // residual WITHOUT the term is below tolerance with a stable contact state,
+  // so the regularization has vanished at the accepted equilibrium.
+  // Without -ptc_move the sub-step is one SNES solve (plain semismooth
+  // Newton), repeated after a candidate refresh.
+  const ProblemParameters &pp = p_.Parameters();
+  const double dmean = p_.MeanDiameter();
+  const double rho_floor = pp.prox_eta * pp.young;
+  const bool ptc = pp.ptc_move > 0.0;
+  double move = pp.ptc_move;
+  const int max_outer = static_cast<int>(pp.ptc_max_steps);
+  int failures = 0;  // failed inner solves in a row
+  double phi_last = -1.0;
+  PetscLogDouble t_start, t_progress;
+  PetscCall(PetscTime(&t_start));
+  t_progress = t_start;
+  double force_residual = 0.0;
+  if (ptc) {
+    PetscCall(Attach());
+    p_.SetAnchor(0.0);
+    PetscCall(p_.Residual(z_, F_));
+    PetscCall(p_.ForceResidual(F_, &force_residual));
+  }
+  for (int outer = 0, refresh = 0;; ++outer) {
+    PetscCall(Attach());  // packs the state into z_
+    p_.SetAnchor(ptc ? std::max(rho_floor, force_residual / (move * dmean)) : 0.0);
+    checked_.clear();
+    history_.clear();
+    PetscCall(SNESSolve(snes_, nullptr, z_));
+    ++report->inner_solves;
+    PetscInt its;
+    PetscReal atol, rtol, stol;
+    PetscInt maxit, maxf;
+    PetscCall(SNESGetTolerances(snes_, &atol, &rtol, &stol, &maxit, &maxf));
+    PetscCall(SNESGetIterationNumber(snes_, &its));
+    PetscCall(SNESGetConvergedReason(snes_, &report->reason));
+    report->newton_its += its;
+    PetscCall(SNESGetFunctionNorm(snes_, &report->residual));
+    if (report->reason == SNES_DIVERGED_LINEAR_SOLVE) {
+      // MUMPS ran out of its workspace: enlarge it and redo the same step.
+      PC pc;
+      PCFailedReason pc_reason;
+      PetscCall(KSPGetPC(ksp_, &pc));
+      PetscCall(PCGetFailedReason(pc, &pc_reason));
+      int out_of_memory = pc_reason == PC_FACTOR_OUTMEMORY;
+      PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &out_of_memory, 1, MPI_INT, MPI_MAX, comm_));
+      if (out_of_memory && p_.GrowFactorWorkspace()) {
+        PetscCall(PetscInfo(snes_, "MUMPS workspace too small (INFOG(1) = -9): enlarged\n"));
+        --outer;
+        continue;
+      }
+    }
+    if (report->reason <= 0) {
+      if (prm_.ptc_monitor)
+        PetscCall(PetscPrintf(comm_, "  ptc %3d  inner solve failed (%s after %" PetscInt_FMT " its, rho_a %.2e)\n", outer,
+                              SNESConvergedReasons[report->reason], its, p_.AnchorWeight()));
+      // Retry from the anchor with shorter pseudo-time steps, or give up.
+      // A failed inner solve is usually an active-set cycle of the min NCP
+      // function on weakly active contacts (lambda ~ 0, g ~ 0); with
+      // ptc_retry_fb the retry uses Fischer-Burmeister, which is smooth
+      // there, for the rest of the sub-step. (With the mortar law that made
+      // the contact rows cycle at frozen geometry instead: compact turns it
+      // off, docs/validation.md.)
+      if (ptc && outer < max_outer && ++failures <= 8) {
+        move *= 0.25;
+        if (pp.ptc_retry_fb) p_.UseNcpFunction(NcpFunction::FischerBurmeister);
+        continue;
+      }
+      PetscCall(p_.EndLoadStep(false, report));
+      PetscFunctionReturn(0);
+    }
+    PetscCall(p_.AdoptState(z_));
+    bool stale = false;
+    PetscCall(p_.CandidatesStale(&stale));
+    if (stale && (ptc || refresh < 5)) {
+      PetscCall(p_.RefreshCandidates());
+      ++report->candidate_refreshes;
+      ++refresh;
+      if (!ptc) continue;
+    }
+    if (!ptc) break;
+    // Equilibrium test without the pseudo-transient term.
+    const std::vector<char> active_inner = p_.ActiveSet();
+    p_.SetAnchor(0.0);
+    PetscCall(Attach());
+    PetscReal true_norm;
+    PetscCall(p_.Residual(z_, F_));
+    PetscCall(VecNorm(F_, NORM_2, &true_norm));
+    PetscInt where;
+    PetscCall(p_.ForceResidual(F_, &force_residual, &where));
+    report->residual = true_norm;
+    // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
+    double part[5];
+    PetscCall(p_.ResidualBlocks(F_, part));
+    const double phi = p_.PackingFraction();
+    if (prm_.ptc_monitor) {
+      PetscCall(PetscPrintf(comm_, "    largest force %.3e on %s\n", force_residual, p_.DescribeUnknown(where).c_str()));
+      PetscCall(PetscPrintf(comm_,
+                            "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)  |F|_inf %.3e  phi %.7f  move %.2e  its %" PetscInt_FMT "%s\n",
+                            outer, (double)true_norm, part[0], part[1], part[2], part[3], part[4], force_residual, phi, move, its,
+                            stale ? "  (candidates refreshed)" : ""));
+    }
+    if (pp.progress_interval >= 0.0 && !prm_.ptc_monitor) {
+      // A heartbeat for long sub-steps (thousands of Newton iterations at 1500 disks): rank 0's clock decides, so
+      // the ranks agree on whether to print.
+      PetscLogDouble now;
+      PetscCall(PetscTime(&now));
+      int due = now - t_progress >= pp.progress_interval;
+      PetscCallMPI(MPI_Bcast(&due, 1, MPI_INT, 0, comm_));
+      if (due) {
+        t_progress = now;
+        PetscCall(PetscPrintf(comm_,
+                              "    ... P/E %.4g: pseudo-time step %d, %" PetscInt_FMT " Newton its, |F|_inf %.2e P<d>"
+                              " (level criterion %.0e), phi %.6f, %.0f s in this sub-step\n",
+                              pressure / pp.young, outer + 1, report->newton_its,
+                              force_residual / (std::max(pressure, 1e-300) * dmean), pp.level_force_rtol, phi,
+                              now - t_start));
+      }
+    }
+    report->force_residual = force_residual;
+    const bool settled = !stale && p_.ActiveSet() == active_inner;
+    if (settled && true_norm <= atol) break;  // exact equilibrium
+    // The paper's level criterion: unbalanced forces small compared with the
+    // contact forces (P <d>), the packing fraction no longer changing, and
+    // the contact conditions (Signorini, Coulomb) still satisfied exactly.
+    const double ncp_norm = std::hypot(part[3], part[4]);
+    if (settled && pp.level_force_rtol > 0.0 && force_residual <= pp.level_force_rtol * pressure * dmean &&
+        ncp_norm <= atol && std::abs(phi - phi_last) <= pp.level_phi_rtol * phi) {
+      report->relaxed = true;
+      break;
+    }
+    phi_last = phi;
+    if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step
+      report->reason = SNES_DIVERGED_MAX_IT;
+      PetscCall(p_.EndLoadStep(false, report));
+      PetscFunctionReturn(0);
+    }
+    failures = 0;
+    if (its <= pp.ptc_easy_its) move = std::min(2.0 * move, 1.0);
+  }
+  PetscCall(p_.EndLoadStep(true, report));
+  PetscFunctionReturn(0);
+}
+
 }  // namespace
 
 PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
                           SolveReport *report) {
   PetscFunctionBeginUser;
   if (params.strategy == LevelStrategy::Anchored) {
-    PetscCall(problem.Solve(pressure, report));
+    AnchoredContinuation solver(problem, params);
+    PetscCall(solver.Solve(pressure, report));
     report->factorizations = static_cast<int>(report->newton_its);  // one LU per Newton iteration
     PetscFunctionReturn(0);
   }

@@ -115,7 +115,7 @@ PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   static const char *const later[] = {"snes_", "ksp_", "pc_", "mat_", "jac_", "log", "info", "options_", "malloc",
                                       "help", "version", "on_error", "no_signal_handler", "fp_trap", "memory_view",
                                       "viewer", "draw", "vec_", "petsc", "check_pointer", "device_", "root_device",
-                                      "newton_monitor", "ptc_monitor", "mpi", "start_in_debugger", "debugger", "stop_for_debugger",
+                                      "mpi", "start_in_debugger", "debugger", "stop_for_debugger",
                                       "history", "tmp", "shared_tmp", "not_shared_tmp", "skip_petscrc",
                                       "objects_dump", "checkstack", "get_total_flops", "use_gpu_aware_mpi", "saws",
                                       "display", "nox", "x_virtual", "python", "dm_", "is_", "sf_", "options_file", "sub_"};

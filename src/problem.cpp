@@ -751,7 +751,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
 }
 
 // ---------------------------------------------------------------------------
-// PETSc callbacks.
+// Residual and Jacobian on the distributed layout (own + ghost unknowns gathered).
 PetscErrorCode CompactionProblem::Gather(Vec z, bool full) {
   PetscFunctionBeginUser;
   VecScatter sc = full ? to_all_ : to_local_;
@@ -760,204 +760,90 @@ PetscErrorCode CompactionProblem::Gather(Vec z, bool full) {
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode FormFunction(SNES snes, Vec z, Vec F, void *ctx) {
-  auto *p = static_cast<CompactionProblem *>(ctx);
+PetscErrorCode CompactionProblem::FormResidual(Vec z, Vec F) {
   const PetscScalar *za;
   PetscScalar *fa;
   bool inverted = false;
   PetscFunctionBeginUser;
   PetscCall(PetscLogEventBegin(event_residual, 0, 0, 0, 0));
-  PetscCall(p->Gather(z, false));
-  PetscCall(VecGetArrayRead(p->zall_, &za));
-  PetscCall(VecSet(p->fall_, 0.0));
-  PetscCall(VecGetArray(p->fall_, &fa));
-  PetscCall(p->Assemble(za, fa, nullptr, nullptr, nullptr, &inverted, &p->active_now_));
-  PetscCall(VecRestoreArray(p->fall_, &fa));
-  PetscCall(VecRestoreArrayRead(p->zall_, &za));
+  PetscCall(Gather(z, false));
+  PetscCall(VecGetArrayRead(zall_, &za));
+  PetscCall(VecSet(fall_, 0.0));
+  PetscCall(VecGetArray(fall_, &fa));
+  PetscCall(Assemble(za, fa, nullptr, nullptr, nullptr, &inverted, &active_now_));
+  PetscCall(VecRestoreArray(fall_, &fa));
+  PetscCall(VecRestoreArrayRead(zall_, &za));
   // Sum every rank's contributions (natural order) into the distributed residual.
   PetscCall(VecSet(F, 0.0));
-  PetscCall(VecScatterBegin(p->to_local_, p->fall_, F, ADD_VALUES, SCATTER_REVERSE));
-  PetscCall(VecScatterEnd(p->to_local_, p->fall_, F, ADD_VALUES, SCATTER_REVERSE));
+  PetscCall(VecScatterBegin(to_local_, fall_, F, ADD_VALUES, SCATTER_REVERSE));
+  PetscCall(VecScatterEnd(to_local_, fall_, F, ADD_VALUES, SCATTER_REVERSE));
   // Contact states: each rank set those of its contacts (others are kOpen = 0).
-  if (p->size_ > 1 && !p->active_now_.empty())
-    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, p->active_now_.data(), static_cast<int>(p->active_now_.size()), MPI_CHAR,
-                               MPI_MAX, p->comm_));
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &inverted, 1, MPI_C_BOOL, MPI_LOR, p->comm_));
-  p->inverted_ = inverted;
-  if (inverted && snes) PetscCall(SNESSetFunctionDomainError(snes));
+  if (size_ > 1 && !active_now_.empty())
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, active_now_.data(), static_cast<int>(active_now_.size()), MPI_CHAR,
+                               MPI_MAX, comm_));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &inverted, 1, MPI_C_BOOL, MPI_LOR, comm_));
+  inverted_ = inverted;
   PetscCall(PetscLogEventEnd(event_residual, 0, 0, 0, 0));
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode FormJacobian(SNES, Vec z, Mat J, Mat, void *ctx) {
-  auto *p = static_cast<CompactionProblem *>(ctx);
+PetscErrorCode CompactionProblem::FormJacobian(Vec z, Mat J) {
   const PetscScalar *za;
   PetscFunctionBeginUser;
   PetscCall(PetscLogEventBegin(event_jacobian, 0, 0, 0, 0));
-  PetscCall(p->Gather(z, false));
-  PetscCall(VecGetArrayRead(p->zall_, &za));
-  p->coo_values_.clear();
-  PetscCall(p->Assemble(za, nullptr, nullptr, nullptr, &p->coo_values_, nullptr, nullptr));
-  PetscCall(VecRestoreArrayRead(p->zall_, &za));
-  PetscCall(MatSetValuesCOO(J, p->coo_values_.data(), INSERT_VALUES));
+  PetscCall(Gather(z, false));
+  PetscCall(VecGetArrayRead(zall_, &za));
+  coo_values_.clear();
+  PetscCall(Assemble(za, nullptr, nullptr, nullptr, &coo_values_, nullptr, nullptr));
+  PetscCall(VecRestoreArrayRead(zall_, &za));
+  PetscCall(MatSetValuesCOO(J, coo_values_.data(), INSERT_VALUES));
   PetscCall(PetscLogEventEnd(event_jacobian, 0, 0, 0, 0));
   PetscFunctionReturn(0);
 }
 
-// Converged only when the residual is small and the contact states are stable.
-PetscErrorCode ConvergenceTest(SNES snes, PetscInt it, PetscReal, PetscReal snorm, PetscReal fnorm,
-                               SNESConvergedReason *reason, void *ctx) {
-  auto *p = static_cast<CompactionProblem *>(ctx);
-  PetscReal atol, rtol, stol;
-  PetscInt maxit, maxf;
+PetscErrorCode CompactionProblem::PrintChangedContacts(const std::vector<char> &before) const {
+  const PetscScalar *za;
   PetscFunctionBeginUser;
-  PetscCall(SNESGetTolerances(snes, &atol, &rtol, &stol, &maxit, &maxf));
-  // The contact states are reduced over the ranks in FormFunction, so every
-  // rank finds the same answer here.
-  const bool changed_any = p->active_now_ != p->active_checked_;
-  // How far from its switch is the most decided of the contacts that changed
-  // state (each rank knows the margins of those it owns, the others are 0;
-  // changed_any is the same on every rank, so the reduction is collective).
-  double changed_margin = 0.0;
-  if (changed_any) {
-    changed_margin = p->active_checked_.size() == p->active_now_.size()
-                         ? changed_state_margin(p->active_checked_, p->active_now_, p->switch_margin_)
-                         : INFINITY;
-    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &changed_margin, 1, MPI_DOUBLE, MPI_MAX, p->comm_));
-  }
-  p->active_checked_ = p->active_now_;
-  *reason = SNES_CONVERGED_ITERATING;
-  if (it == 0) p->fnorm0_ = fnorm;
-  if (PetscIsInfOrNanReal(fnorm)) {
-    *reason = SNES_DIVERGED_FNORM_NAN;
-  } else if (fnorm <= std::max<PetscReal>(atol, rtol * p->fnorm0_) &&
-             (it == 0 || !changed_any || snorm <= 1e-12 * p->mean_diameter_ ||
-              changed_margin <= kDegenerateSwitch * atol)) {
-    // A contact state may still flip at a converged point when the contact
-    // is degenerate (lambda_n = g = 0 to round-off, e.g. a rattler resting
-    // on a neighbour, or |lambda_t| = mu lambda_n with no slip): both
-    // linearizations hold there, and the residual, which uses the exact NCP
-    // functions, is already zero. Such flips are accepted when every contact
-    // that changed is within kDegenerateSwitch atol of its switch. Two-pass
-    // deformable contact makes them common: the two passes of a conforming
-    // contact share its force in an indeterminate way, and each Newton step
-    // moves the share, flipping weakly loaded nodes (lambda_n ~ 1e-10 E<d>)
-    // between open, stick and slip forever.
-    *reason = SNES_CONVERGED_FNORM_ABS;
-  } else if (it >= maxit) {
-    *reason = SNES_DIVERGED_MAX_IT;
-  } else if (p->rho_anchor_ > 0.0 && it >= p->params_.ptc_stall_its && fnorm > 0.5 * p->fnorm0_) {
-    // Inside pseudo-transient continuation a converging inner solve has at
-    // least halved its residual after ptc_stall_its (6) iterations (measured
-    // at 20-100 disks: they converge in 2-7); one that has not is cycling (contact states or slip
-    // directions) and is cut short: the outer loop retries with more damping.
-    *reason = SNES_DIVERGED_DTOL;
-  }
+  PetscCall(VecGetArrayRead(zall_, &za));
+  if (before.size() == active_now_.size())
+    for (size_t c = 0; c < candidates_.size(); ++c) {
+      const ContactCandidate &cc = candidates_[c];
+      if (before[c] == active_now_[c] || CandidateOwner(cc) != rank_) continue;
+      LocalContact lc;
+      ContactGeometry(cc, za, &lc);
+      const PetscInt lt = tangential_index_[c];
+      static const char *const names[] = {"open", "closed", "sliding"};
+      PetscCall(PetscSynchronizedPrintf(comm_,
+                                        "      contact %zu (type %d, slave %d point %d, master %d): %s -> %s  lambda_n %.3e  gap %.3e  lambda_t %.3e  slip %.3e\n",
+                                        c, (int)cc.type, cc.body, cc.point, cc.master, names[(int)before[c]],
+                                        names[(int)active_now_[c]], za[MultiplierOffset() + c], lc.k.gap,
+                                        lt >= 0 ? za[lt] : 0.0, lc.k.slip));
+    }
+  PetscCall(PetscSynchronizedFlush(comm_, PETSC_STDOUT));
+  PetscCall(VecRestoreArrayRead(zall_, &za));
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode NewtonMonitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx) {
-  auto *p = static_cast<CompactionProblem *>(ctx);
-  int closed = 0, sliding = 0;
-  PetscFunctionBeginUser;
-  for (char a : p->ActiveSet()) closed += a == kClosed, sliding += a == kSliding;
-  // Largest entry of the last Newton update and the kind of unknown it belongs to.
-  char where[64] = "";
-  if (it > 0) {
-    Vec dz;
-    PetscInt imax;
-    PetscReal dmax;
-    PetscCall(SNESGetSolutionUpdate(snes, &dz));
-    PetscCall(VecMax(dz, &imax, &dmax));
-    PetscReal dmin;
-    PetscInt imin;
-    PetscCall(VecMin(dz, &imin, &dmin));
-    if (-dmin > dmax) dmax = -dmin, imax = imin;
-    imax = p->natural_of_[imax];
-    const char *kind = imax < p->WallOffset() ? "body" : imax < p->GaugeOffset() ? "wall" :
-                       imax < p->MultiplierOffset() ? "gauge" : imax < p->TangentialOffset() ? "lambda_n" : "lambda_t";
-    PetscCall(PetscSNPrintf(where, sizeof(where), "  max|dz| %.2e (%s %" PetscInt_FMT ")", (double)dmax, kind, imax));
-  }
-  PetscCall(PetscPrintf(PETSC_COMM_WORLD, "    newton %2" PetscInt_FMT "  |R| %.3e  closed contacts %d  sliding %d  rho_a %.1e%s\n",
-                        it, (double)fnorm, closed, sliding, p->rho_anchor_, where));
-  // -newton_monitor_contacts: every contact whose state changed in the last
-  // iteration (the contacts of an active-set cycle), with its multipliers,
-  // gap and slip at the new iterate. Each rank lists the contacts it owns.
-  if (p->monitor_contacts_) {
-    const PetscScalar *za;
-    PetscCall(VecGetArrayRead(p->zall_, &za));
-    if (p->monitor_states_.size() == p->active_now_.size())
-      for (size_t c = 0; c < p->candidates_.size(); ++c) {
-        const ContactCandidate &cc = p->candidates_[c];
-        if (p->monitor_states_[c] == p->active_now_[c] || p->CandidateOwner(cc) != p->rank_) continue;
-        CompactionProblem::LocalContact lc;
-        p->ContactGeometry(cc, za, &lc);
-        const PetscInt lt = p->tangential_index_[c];
-        static const char *const names[] = {"open", "closed", "sliding"};
-        PetscCall(PetscSynchronizedPrintf(p->comm_,
-                                          "      contact %zu (type %d, slave %d point %d, master %d): %s -> %s  lambda_n %.3e  gap %.3e  lambda_t %.3e  slip %.3e\n",
-                                          c, (int)cc.type, cc.body, cc.point, cc.master, names[(int)p->monitor_states_[c]],
-                                          names[(int)p->active_now_[c]], za[p->MultiplierOffset() + c], lc.k.gap,
-                                          lt >= 0 ? za[lt] : 0.0, lc.k.slip));
-      }
-    PetscCall(PetscSynchronizedFlush(p->comm_, PETSC_STDOUT));
-    PetscCall(VecRestoreArrayRead(p->zall_, &za));
-    p->monitor_states_ = p->active_now_;
-  }
-  PetscFunctionReturn(0);
+std::string CompactionProblem::DescribeUnknown(PetscInt where) const {
+  if (where < 0) return "nothing";
+  if (where >= TangentialOffset()) return "lambda_t";
+  if (where >= MultiplierOffset()) return "lambda_n";
+  if (where >= GaugeOffset()) return "gauge";
+  for (const DeformableBody &b : bodies_)
+    if (where >= b.dof_offset && where < b.dof_offset + 2 * b.mesh.num_nodes())
+      return "deformable particle " + std::to_string(b.particle) + " node " + std::to_string((where - b.dof_offset) / 2);
+  for (const RigidBody &r : rigid_)
+    if (where >= r.dof_offset && where < r.dof_offset + RigidDofs())
+      return "rigid particle " + std::to_string(r.particle) + " dof " + std::to_string(where - r.dof_offset);
+  return "wall";
 }
 
-// Line-search pre-check: a Newton step that would move a body (or a wall)
-// by more than newton_max_move <d> is scaled down as a whole. Far from
-// equilibrium the linearized contact geometry is valid only over a fraction
-// of a diameter; near equilibrium steps are tiny and untouched, so the
-// quadratic rate is kept. (PETSc subtracts the step: x_new = x - y.)
-PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *ctx) {
-  auto *p = static_cast<CompactionProblem *>(ctx);
-  const PetscScalar *ya;
-  PetscInt lo, hi;
-  PetscFunctionBeginUser;
-  *changed = PETSC_FALSE;
-  // Active-set cycles: semismooth Newton can alternate between contact states
-  // (typically stick <-> slip of a contact on the edge of its cone), each
-  // linearization sending the iterate into the other's region. When the
-  // state at the current iterate repeats one of two or three iterations ago
-  // (and is not the last one), the step is halved, which lands between the
-  // two regions and breaks the cycle. States are compared on all ranks.
-  {
-    std::uint64_t h = 1469598103934665603ull;  // FNV-1a of the contact states
-    for (char a : p->active_now_) h = (h ^ static_cast<unsigned char>(a)) * 1099511628211ull;
-    std::vector<std::uint64_t> &hist = p->active_history_;
-    bool cycle = false;
-    for (size_t k = 2; k <= 3 && k <= hist.size(); ++k)
-      if (hist[hist.size() - k] == h && hist.back() != h) cycle = true;
-    hist.push_back(h);
-    if (hist.size() > 4) hist.erase(hist.begin());
-    p->backtrack_ = cycle;  // the post-check (Backtrack) makes this step decrease |R|
+void CompactionProblem::SetAnchor(double rho) {
+  rho_anchor_ = rho;
+  if (rho > 0.0) {
+    anchor_.assign(u_.begin(), u_.end());
+    anchor_.insert(anchor_.end(), w_, w_ + 4);
   }
-  const double cap = p->params_.newton_max_move * p->mean_diameter_;
-  if (cap <= 0.0) PetscFunctionReturn(0);
-  {
-    double alpha;
-    PetscCall(VecScale(Y, -1.0));  // the update is -Y
-    PetscCall(p->ContactStepFraction(Y, &alpha));
-    PetscCall(VecScale(Y, -alpha));
-    *changed = alpha < 1.0 ? PETSC_TRUE : PETSC_FALSE;
-  }
-  PetscCall(VecGetOwnershipRange(Y, &lo, &hi));
-  PetscCall(VecGetArrayRead(Y, &ya));
-  double m = 0.0;
-  for (PetscInt i = lo; i < hi; ++i) {
-    const PetscInt n = p->natural_of_[i];
-    if (n < p->GaugeOffset()) m = std::max(m, std::abs(ya[i - lo]) * std::sqrt(p->prox_weight_[n]));
-  }
-  PetscCall(VecRestoreArrayRead(Y, &ya));
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &m, 1, MPI_DOUBLE, MPI_MAX, p->comm_));
-  if (m > cap) {
-    PetscCall(VecScale(Y, cap / m));
-    *changed = PETSC_TRUE;
-  }
-  PetscFunctionReturn(0);
 }
 
 // Contacts open at the current iterate that the linearized update dz would
@@ -1010,63 +896,14 @@ PetscErrorCode CompactionProblem::ContactStepFraction(Vec dz, double *fraction) 
   PetscFunctionReturn(0);
 }
 
-// Line-search post-check. The trial point W = X - lambda Y becomes
-// RotatedUpdate(X, -lambda Y): each deformable body's mean rotation is applied
-// as a finite rotation (a linearized rotation of a nearly incompressible disk
-// changes its area, see RotatedUpdate). After an active-set cycle was
-// detected (LimitStep), the step is backtracked, alpha = 1, 1/2, ..., 1/64,
-// until |R| decreases (Armijo with the Newton slope -|R|^2, sigma = 1e-4); if
-// no fraction decreases it, the one with the smallest |R| is taken. Plain
-// semismooth Newton is non-monotone (a change of the active set may raise
-// |R| for one step), so this monotone safeguard is only used on cycles,
-// which it breaks: a cycle returns |R| to a value it had before.
-PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *changed_Y, PetscBool *changed_W, void *ctx) {
-  auto *p = static_cast<CompactionProblem *>(ctx);
-  PetscReal xnorm, fnorm, ynorm, lambda;
-  PetscFunctionBeginUser;
-  *changed_Y = PETSC_FALSE;
-  PetscCall(SNESLineSearchGetLambda(ls, &lambda));  // W = X - lambda Y (1 for the basic line search)
-  if (!p->step_) PetscCall(VecDuplicate(p->r_, &p->step_));
-  const auto trial = [&](double alpha) -> PetscErrorCode {
-    PetscFunctionBeginUser;
-    PetscCall(VecAXPBY(p->step_, -alpha * lambda, 0.0, Y));
-    PetscCall(p->RotatedUpdate(X, p->step_, W));
-    PetscFunctionReturn(0);
-  };
-  PetscCall(trial(1.0));
-  *changed_W = PETSC_TRUE;
-  if (!p->backtrack_) PetscFunctionReturn(0);
-  p->backtrack_ = false;
-  PetscCall(SNESLineSearchGetNorms(ls, &xnorm, &fnorm, &ynorm));
-  if (!p->work_) PetscCall(VecDuplicate(p->r_, &p->work_));
-  double best_alpha = 1.0, best_norm = INFINITY;
-  for (double alpha = 1.0; alpha >= 1.0 / 64; alpha *= 0.5) {
-    PetscCall(trial(alpha));
-    PetscCall(FormFunction(nullptr, W, p->work_, p));
-    PetscReal norm;
-    PetscCall(VecNorm(p->work_, NORM_2, &norm));
-    if (p->inverted_) norm = INFINITY;
-    if (norm < best_norm) best_norm = norm, best_alpha = alpha;
-    if (norm <= (1.0 - 1e-4 * alpha) * fnorm) break;
-  }
-  PetscCall(trial(best_alpha));
-  if (best_alpha < 1.0) {
-    PetscCall(VecScale(Y, best_alpha));
-    *changed_Y = PETSC_TRUE;
-  }
-  PetscFunctionReturn(0);
-}
-
 PetscErrorCode CompactionProblem::DestroySolver() {
   PetscFunctionBeginUser;
-  PetscCall(SNESDestroy(&snes_));
+  PetscCall(KSPDestroy(&ksp_));
   PetscCall(MatDestroy(&J_));
   PetscCall(VecDestroy(&z_));
   PetscCall(VecDestroy(&r_));
   PetscCall(VecDestroy(&zall_));
   PetscCall(VecDestroy(&yall_));
-  PetscCall(VecDestroy(&work_));
-  PetscCall(VecDestroy(&step_));
   PetscCall(VecDestroy(&fall_));
   PetscCall(VecScatterDestroy(&to_all_));
   PetscCall(VecScatterDestroy(&to_local_));
@@ -1192,32 +1029,20 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscCall(MatSetPreallocationCOO(J_, static_cast<PetscCount>(ci.size()), ci.data(), cj.data()));
   ++layouts_created_;
 
-  PetscCall(SNESCreate(comm_, &snes_));
-  PetscCall(SNESSetType(snes_, SNESNEWTONLS));
-  PetscCall(SNESSetFunction(snes_, r_, FormFunction, this));
-  PetscCall(SNESSetJacobian(snes_, J_, J_, FormJacobian, this));
-  PetscCall(SNESSetConvergenceTest(snes_, ConvergenceTest, this, nullptr));
-  // Forces are per unit thickness, in units of E * d; the tolerance is absolute in those units.
-  // With pseudo-transient continuation a stalled inner solve (active-set or
-  // slip-direction cycling) is better cut short: the outer loop then retries
-  // with ten times the damping.
-  const PetscInt max_it = params_.ptc_move > 0.0 ? 15 : 50;
-  PetscCall(SNESSetTolerances(snes_, 1e-11 * params_.young * mean_diameter_, 1e-30, 0.0, max_it, -1));
-  SNESLineSearch ls;
-  PetscCall(SNESGetLineSearch(snes_, &ls));
-  PetscCall(SNESLineSearchSetType(ls, SNESLINESEARCHBT));
-  KSP ksp;
+  // The Newton matrix is factored by MUMPS LU unless the options say
+  // otherwise (-ksp_type, -pc_type, -pc_factor_mat_solver_type).
+  PetscCall(KSPCreate(comm_, &ksp_));
+  PetscCall(KSPSetOperators(ksp_, J_, J_));
+  PetscCall(KSPSetType(ksp_, KSPPREONLY));
   PC pc;
-  PetscCall(SNESGetKSP(snes_, &ksp));
-  PetscCall(KSPSetType(ksp, KSPPREONLY));
-  PetscCall(KSPGetPC(ksp, &pc));
+  PetscCall(KSPGetPC(ksp_, &pc));
   PetscCall(PCSetType(pc, PCLU));
   PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
-  PetscCall(SNESSetFromOptions(snes_));
+  PetscCall(KSPSetFromOptions(ksp_));
   // Contact saddle points need numerical pivoting, and MUMPS' workspace
   // estimate (made before pivoting) is then often too small (INFOG(1) = -9):
   // reserve mumps_extra_ % more (100 at first, doubled after each such
-  // failure, see Solve) unless -mat_mumps_icntl_14 says otherwise.
+  // failure, see GrowFactorWorkspace) unless -mat_mumps_icntl_14 says otherwise.
   MatSolverType solver_type = nullptr;
   PetscBool is_lu = PETSC_FALSE, icntl14_set = PETSC_FALSE;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCLU, &is_lu));
@@ -1229,20 +1054,12 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
     PetscCall(PCFactorGetMatrix(pc, &factor));
     PetscCall(MatMumpsSetIcntl(factor, 14, mumps_extra_));
   }
-  PetscBool monitor = PETSC_FALSE;
-  PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-newton_monitor", &monitor, nullptr));
-  PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-newton_monitor_contacts", &monitor_contacts_, nullptr));
-  if (monitor || monitor_contacts_) PetscCall(SNESMonitorSet(snes_, NewtonMonitor, this, nullptr));
-  PetscCall(PetscOptionsGetBool(nullptr, nullptr, "-ptc_monitor", &monitor_outer_, nullptr));
-  PetscCall(SNESGetLineSearch(snes_, &ls));
-  PetscCall(SNESLineSearchSetPreCheck(ls, LimitStep, this));
-  PetscCall(SNESLineSearchSetPostCheck(ls, Backtrack, this));
   PetscFunctionReturn(0);
 }
 
 // Largest unbalanced force of a residual F: body and wall rows, rigid
 // rotations (torques) divided by the radius.
-PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force) const {
+PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force, PetscInt *where) const {
   const PetscScalar *fa;
   PetscFunctionBeginUser;
   PetscCall(VecGetArrayRead(F, &fa));
@@ -1259,26 +1076,15 @@ PetscErrorCode CompactionProblem::ForceResidual(Vec F, double *force) const {
   PetscCall(VecRestoreArrayRead(F, &fa));
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &m, 1, MPI_DOUBLE_INT, MPI_MAXLOC, comm_));
   *force = m.value;
-  if (monitor_outer_ && m.where >= 0) {
-    const PetscInt where = m.where;
-    std::string what = "wall";
-    for (const DeformableBody &b : bodies_)
-      if (where >= b.dof_offset && where < b.dof_offset + 2 * b.mesh.num_nodes())
-        what = "deformable particle " + std::to_string(b.particle) + " node " + std::to_string((where - b.dof_offset) / 2);
-    for (const RigidBody &r : rigid_)
-      if (where >= r.dof_offset && where < r.dof_offset + RigidDofs())
-        what = "rigid particle " + std::to_string(r.particle) + " dof " + std::to_string(where - r.dof_offset);
-    PetscCall(PetscPrintf(comm_, "    largest force %.3e on %s\n", m.value, what.c_str()));
-  }
+  if (where) *where = m.where;
   PetscFunctionReturn(0);
 }
 
 PetscErrorCode CompactionProblem::Layout(Vec *z, Vec *F, Mat *J, KSP *ksp) {
   PetscFunctionBeginUser;
-  if (!snes_) PetscCall(SetUpLayout());
+  if (!ksp_) PetscCall(SetUpLayout());
   PetscCall(PackState(z_));
-  *z = z_, *F = r_, *J = J_;
-  PetscCall(SNESGetKSP(snes_, ksp));
+  *z = z_, *F = r_, *J = J_, *ksp = ksp_;
   PetscFunctionReturn(0);
 }
 
@@ -1291,7 +1097,7 @@ bool CompactionProblem::GrowFactorWorkspace() {
 
 PetscErrorCode CompactionProblem::NewtonMatrix(Vec z, Mat J) {
   PetscFunctionBeginUser;
-  PetscCall(FormJacobian(nullptr, z, J, J, this));
+  PetscCall(FormJacobian(z, J));
   PetscFunctionReturn(0);
 }
 
@@ -1440,7 +1246,7 @@ PetscErrorCode CompactionProblem::ChangedStateMargin(const std::vector<char> &wa
 
 LayoutSizes CompactionProblem::Sizes() {
   LayoutSizes s;
-  if (!snes_ && SetUpLayout() != 0) return s;
+  if (!ksp_ && SetUpLayout() != 0) return s;
   s.total = n_total_;
   for (const RigidBody &r : rigid_) s.rigid += RigidDofs(), (void)r;
   s.deformable = n_body_dofs_ - s.rigid;
@@ -1460,14 +1266,14 @@ double CompactionProblem::ProximalDiagonal(PetscInt i) const {
 
 PetscErrorCode CompactionProblem::EvaluateResidual(Vec z, Vec F) {
   PetscFunctionBeginUser;
-  PetscCall(FormFunction(nullptr, z, F, this));
+  PetscCall(FormResidual(z, F));
   PetscFunctionReturn(0);
 }
 
 PetscErrorCode CompactionProblem::EvaluateJacobian(Vec z, Mat *J) {
   PetscFunctionBeginUser;
   // PETSc 3.18's MatDuplicate does not carry the COO map: fill J_, then copy it.
-  PetscCall(FormJacobian(nullptr, z, J_, J_, this));
+  PetscCall(FormJacobian(z, J_));
   PetscCall(MatDuplicate(J_, MAT_COPY_VALUES, J));
   PetscFunctionReturn(0);
 }
@@ -1556,170 +1362,6 @@ PetscErrorCode CompactionProblem::EndLoadStep(bool converged, SolveReport *repor
   previous_ = step_saved_;
   previous_pressure_ = step_saved_pressure_;
   have_previous_ = true;
-  PetscFunctionReturn(0);
-}
-
-PetscErrorCode CompactionProblem::Solve(double pressure, SolveReport *report) {
-  PetscFunctionBeginUser;
-  *report = SolveReport();
-  PetscCall(BeginLoadStep(pressure));
-  // Pseudo-transient continuation (-ptc_move > 0). The equations get the term
-  // rho_a D (z - z_a), z_a the state at the start of the inner solve: each
-  // SNES solve is an implicit step of an overdamped dynamics in which
-  // rattlers, free rotations and sliding particles move a bounded distance.
-  // rho_a = |F|_inf / (m <d>), F the force residual without the term: an
-  // unbalanced force moves a body by at most about m <d> per step (so the
-  // linearized contact geometry stays valid), and rho_a vanishes with the
-  // residual, so the steps grow to plain Newton steps near equilibrium
-  // (switched evolution relaxation). m doubles after an easy inner solve and
-  // is divided by 4 after a failed one. The level is converged when the
-  // residual WITHOUT the term is below tolerance with a stable contact state,
-  // so the regularization has vanished at the accepted equilibrium.
-  const double rho_floor = params_.prox_eta * params_.young;
-  const bool ptc = params_.ptc_move > 0.0;
-  double move = params_.ptc_move;
-  const int max_outer = static_cast<int>(params_.ptc_max_steps);
-  int failures = 0;  // failed inner solves in a row
-  double phi_last = -1.0;
-  PetscLogDouble t_start, t_progress;
-  PetscCall(PetscTime(&t_start));
-  t_progress = t_start;
-  double force_residual = 0.0;
-  if (ptc) {
-    if (!snes_) PetscCall(SetUpLayout());
-    PetscCall(PackState(z_));
-    rho_anchor_ = 0.0;
-    PetscCall(FormFunction(nullptr, z_, r_, this));
-    PetscCall(ForceResidual(r_, &force_residual));
-  }
-  for (int outer = 0, refresh = 0;; ++outer) {
-    if (!snes_) PetscCall(SetUpLayout());
-    rho_anchor_ = ptc ? std::max(rho_floor, force_residual / (move * mean_diameter_)) : 0.0;
-    anchor_.assign(u_.begin(), u_.end());
-    anchor_.insert(anchor_.end(), w_, w_ + 4);
-    PetscCall(PackState(z_));
-    active_checked_.clear();
-    active_history_.clear();
-    PetscCall(SNESSolve(snes_, nullptr, z_));
-    ++report->inner_solves;
-    PetscInt its;
-    PetscReal atol, rtol, stol;
-    PetscInt maxit, maxf;
-    PetscCall(SNESGetTolerances(snes_, &atol, &rtol, &stol, &maxit, &maxf));
-    PetscCall(SNESGetIterationNumber(snes_, &its));
-    PetscCall(SNESGetConvergedReason(snes_, &report->reason));
-    report->newton_its += its;
-    PetscCall(SNESGetFunctionNorm(snes_, &report->residual));
-    if (report->reason == SNES_DIVERGED_LINEAR_SOLVE && mumps_extra_ < 6400) {
-      // MUMPS ran out of its workspace: enlarge it and redo the same step.
-      KSP ksp;
-      PC pc;
-      PCFailedReason pc_reason;
-      PetscCall(SNESGetKSP(snes_, &ksp));
-      PetscCall(KSPGetPC(ksp, &pc));
-      PetscCall(PCGetFailedReason(pc, &pc_reason));
-      int out_of_memory = pc_reason == PC_FACTOR_OUTMEMORY;
-      PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &out_of_memory, 1, MPI_INT, MPI_MAX, comm_));
-      if (out_of_memory) {
-        mumps_extra_ *= 2;
-        PetscCall(PetscInfo(snes_, "MUMPS workspace too small (INFOG(1) = -9): ICNTL(14) = %d\n", (int)mumps_extra_));
-        PetscCall(DestroySolver());  // the next layout reserves the larger workspace
-        --outer;
-        continue;
-      }
-    }
-    if (report->reason <= 0) {
-      if (monitor_outer_)
-        PetscCall(PetscPrintf(comm_, "  ptc %3d  inner solve failed (%s after %" PetscInt_FMT " its, rho_a %.2e)\n", outer,
-                              SNESConvergedReasons[report->reason], its, rho_anchor_));
-      // Retry from the anchor with shorter pseudo-time steps, or give up.
-      // A failed inner solve is usually an active-set cycle of the min NCP
-      // function on weakly active contacts (lambda ~ 0, g ~ 0); with
-      // ptc_retry_fb the retry uses Fischer-Burmeister, which is smooth
-      // there, for the rest of the sub-step. (With the mortar law that made
-      // the contact rows cycle at frozen geometry instead: compact turns it
-      // off, docs/validation.md.)
-      if (ptc && outer < max_outer && ++failures <= 8) {
-        move *= 0.25;
-        if (params_.ptc_retry_fb) ncp_now_ = NcpFunction::FischerBurmeister;
-        continue;
-      }
-      PetscCall(EndLoadStep(false, report));
-      PetscFunctionReturn(0);
-    }
-    PetscCall(Gather(z_, true));
-    const PetscScalar *za;
-    PetscCall(VecGetArrayRead(zall_, &za));
-    Unpack(za);
-    PetscCall(VecRestoreArrayRead(zall_, &za));
-    bool stale = false;
-    PetscCall(CandidatesStale(&stale));
-    if (stale && (ptc || refresh < 5)) {
-      PetscCall(RefreshCandidates());
-      ++report->candidate_refreshes;
-      ++refresh;
-      if (!ptc) continue;
-    }
-    if (!ptc) break;
-    // Equilibrium test without the pseudo-transient term.
-    const std::vector<char> active_inner = active_now_;
-    rho_anchor_ = 0.0;
-    if (!snes_) PetscCall(SetUpLayout());
-    PetscCall(PackState(z_));
-    PetscReal true_norm;
-    PetscCall(FormFunction(nullptr, z_, r_, this));
-    PetscCall(VecNorm(r_, NORM_2, &true_norm));
-    PetscCall(ForceResidual(r_, &force_residual));
-    report->residual = true_norm;
-    // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
-    double part[5];
-    PetscCall(ResidualBlocks(r_, part));
-    const double phi = PackingFraction();
-    if (monitor_outer_) {
-      PetscCall(PetscPrintf(comm_,
-                            "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)  |F|_inf %.3e  phi %.7f  move %.2e  its %" PetscInt_FMT "%s\n",
-                            outer, (double)true_norm, part[0], part[1], part[2], part[3], part[4], force_residual, phi, move, its,
-                            stale ? "  (candidates refreshed)" : ""));
-    }
-    if (params_.progress_interval >= 0.0 && !monitor_outer_) {
-      // A heartbeat for long sub-steps (thousands of Newton iterations at 1500 disks): rank 0's clock decides, so
-      // the ranks agree on whether to print.
-      PetscLogDouble now;
-      PetscCall(PetscTime(&now));
-      int due = now - t_progress >= params_.progress_interval;
-      PetscCallMPI(MPI_Bcast(&due, 1, MPI_INT, 0, comm_));
-      if (due) {
-        t_progress = now;
-        PetscCall(PetscPrintf(comm_,
-                              "    ... P/E %.4g: pseudo-time step %d, %" PetscInt_FMT " Newton its, |F|_inf %.2e P<d>"
-                              " (level criterion %.0e), phi %.6f, %.0f s in this sub-step\n",
-                              pressure / params_.young, outer + 1, report->newton_its,
-                              force_residual / (std::max(pressure, 1e-300) * mean_diameter_), params_.level_force_rtol, phi,
-                              now - t_start));
-      }
-    }
-    report->force_residual = force_residual;
-    const bool settled = !stale && active_now_ == active_inner;
-    if (settled && true_norm <= atol) break;  // exact equilibrium
-    // The paper's level criterion: unbalanced forces small compared with the
-    // contact forces (P <d>), the packing fraction no longer changing, and
-    // the contact conditions (Signorini, Coulomb) still satisfied exactly.
-    const double ncp_norm = std::hypot(part[3], part[4]);
-    if (settled && params_.level_force_rtol > 0.0 && force_residual <= params_.level_force_rtol * pressure * mean_diameter_ &&
-        ncp_norm <= atol && std::abs(phi - phi_last) <= params_.level_phi_rtol * phi) {
-      report->relaxed = true;
-      break;
-    }
-    phi_last = phi;
-    if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step
-      report->reason = SNES_DIVERGED_MAX_IT;
-      PetscCall(EndLoadStep(false, report));
-      PetscFunctionReturn(0);
-    }
-    failures = 0;
-    if (its <= params_.ptc_easy_its) move = std::min(2.0 * move, 1.0);
-  }
-  PetscCall(EndLoadStep(true, report));
   PetscFunctionReturn(0);
 }
 

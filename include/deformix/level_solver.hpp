@@ -39,8 +39,30 @@
 //   cannot re-solve with a larger shift. Hence this loop on PETSc's KSP and
 //   the problem's residual and Jacobian.
 // anchored: pseudo-transient continuation with each pseudo-time step solved
-//   to convergence by SNESNEWTONLS (CompactionProblem::Solve, the -ptc_*
-//   options; accepted by the per-node criterion |F|_inf <= tol P <d>).
+//   to convergence by SNESNEWTONLS. Each inner solve adds rho D (z - z_a)
+//   to the body and wall rows (the problem's SetAnchor), rho = |F|_inf /
+//   (m <d>) from the unbalanced force F of the previous pseudo-time step, m
+//   = -ptc_move at first, doubled after an inner solve of at most
+//   -ptc_easy_its iterations, divided by 4 after a failed one; the anchor
+//   moves to each solution and rho vanishes with F. A sub-step is accepted at
+//   exact equilibrium (|R| <= 1e-11 E <d>) or, with -level_force_rtol tol >
+//   0, by the paper's criterion per node (|F|_inf <= tol P <d>, phi settled
+//   to -level_phi_rtol, contact rows exact). Without -ptc_move it is plain
+//   semismooth Newton.
+//   Newton stops only when |R| is below tolerance AND the set of open /
+//   sticking / sliding contacts did not change in the last iteration
+//   (deal.II step-42's rule), or the last step was at round-off, or every
+//   contact that changed is within 1e3 atol of its switch: a degenerate
+//   contact (lambda_n = c_n g = 0, or |lambda_t| = mu lambda_n without slip)
+//   may flip state forever at a converged point, where both of its states'
+//   equations hold (contact_law.hpp, changed_state_margin). Newton steps are
+//   capped at -newton_max_move <d> and shortened so that open contacts are
+//   not overshot (ContactStepFraction). A Newton step taken from contact
+//   states equal to those of two or three iterations ago (an active-set
+//   cycle, typically stick <-> slip on the edge of the cone) is backtracked
+//   until |R| decreases; an inner solve that has not halved its residual in
+//   -ptc_stall_its (6) iterations is cut short and retried with more damping.
+//   The SNES and its callbacks live in level_solver.cpp over a small context.
 #pragma once
 #include "deformix/problem.hpp"
 
@@ -53,6 +75,9 @@ struct LevelSolverParameters {
   PetscInt max_its = 200;     // linearizations per load step before it counts as failed
   double initial_move = 0.1;  // trust radius m at the start of a load step, in <d>
   PetscBool monitor = PETSC_FALSE;  // -level_monitor: one line per Newton iteration
+  PetscBool ptc_monitor = PETSC_FALSE;              // anchored: -ptc_monitor, one line per pseudo-time step
+  PetscBool newton_monitor = PETSC_FALSE;           // anchored: -newton_monitor, one line per Newton iteration
+  PetscBool newton_monitor_contacts = PETSC_FALSE;  // anchored: -newton_monitor_contacts
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
 

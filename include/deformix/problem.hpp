@@ -15,9 +15,10 @@
 //   R_n  = C_n(lambda_n, g)                  (Signorini, contact_law.hpp)
 //   R_t  = C_t(lambda_t, lambda_n, g, s)     (Coulomb, contact_law.hpp)
 // i.e. the KKT conditions of min sum W(u) + P * box_area(w) under g >= 0
-// with incremental Coulomb friction on the slip s over the load step. The
-// system is solved by semismooth Newton (SNESNEWTONLS with the generalized
-// Jacobian of the NCP functions, MUMPS LU by default).
+// with incremental Coulomb friction on the slip s over the load step. This
+// class is the operator: state, residual, Newton matrix (the generalized
+// Jacobian of the NCP functions) and its MUMPS LU (by default); the level
+// solvers (level_solver.hpp) drive it by semismooth Newton.
 //
 // Contact pairs (pair_kinematics.hpp, wall_box.hpp): a boundary point of a
 // deformable disk against a wall, a rigid disk against a wall, rigid-rigid,
@@ -48,27 +49,8 @@
 // each such body is fixed by a Lagrange multiplier (a torque) that is zero
 // at the symmetric equilibrium of the single-particle test, and is reported.
 //
-// Packings (ptc_move > 0): pseudo-transient continuation. Each inner SNES
-// solve adds rho D (z - z_anchor) to the body and wall rows, with rho =
-// |F|_inf / (ptc_move <d>) from the unbalanced force F of the previous
-// pseudo-time step, and the anchor moves to each solution; rho vanishes with
-// F. A solve is accepted at exact equilibrium (|R| <= atol) or, with
-// level_force_rtol > 0, by the paper's criterion (|F|_inf <= level_force_rtol
-// P <d>, phi settled to level_phi_rtol, contact rows exact).
-//
-// Newton stops only when |R| is below tolerance AND the set of open /
-// sticking / sliding contacts did not change in the last iteration
-// (deal.II step-42's rule), or the last step was at round-off, or every
-// contact that changed is within 1e3 atol of its switch: a degenerate
-// contact (lambda_n = c_n g = 0, or |lambda_t| = mu lambda_n without slip)
-// may flip state forever at a converged point, where both of its states'
-// equations hold (contact_law.hpp, changed_state_margin).
-// A Newton step taken from contact states equal to those of two or three
-// iterations ago (an active-set cycle, typically stick <-> slip on the edge
-// of the cone) is backtracked until |R| decreases (LimitStep flags it, the
-// line-search post-check Backtrack shortens it); inside pseudo-transient
-// continuation an inner solve that has not halved its residual in
-// ptc_stall_its (6) iterations is cut short and retried with more damping.
+// Packings (ptc_move > 0): the pseudo-transient term rho D (z - z_anchor)
+// on the body and wall rows (SetAnchor), which the level solvers drive.
 //
 // Parallel layout. Particles are the unit of ownership: METIS partitions the
 // particle graph (vertices weighted by unknowns, edges = contact candidates;
@@ -260,11 +242,6 @@ class CompactionProblem {
   // Places the walls (x_left, x_right, y_bottom, y_top).
   void SetWalls(const double w[4]);
 
-  // Solves equilibrium at pressure P starting from the current state by
-  // pseudo-transient continuation (-level_solver anchored). On success the
-  // state is updated; on failure it is left unchanged.
-  PetscErrorCode Solve(double pressure, SolveReport *report);
-
   // ---- What a level solver (level_solver.hpp) drives: the operator. ----
   // Starts a load step to pressure P: saves the state (EndLoadStep(false)
   // restores it), predicts the new state along the load path, scales the
@@ -281,10 +258,17 @@ class CompactionProblem {
   // twice as much (the current one is destroyed). False when already at the cap.
   bool GrowFactorWorkspace();
   int LayoutsCreated() const { return layouts_created_; }
-  // Residual F(z) (exact NCP rows, no regularization) and the Newton matrix
-  // J(z) + diag(ProximalDiagonal) in J (the matrix of Layout()).
+  // Residual F(z) (exact NCP rows; plus the anchor term of SetAnchor) and
+  // the Newton matrix J(z) + diag(ProximalDiagonal) in J (the matrix of Layout()).
   PetscErrorCode Residual(Vec z, Vec F) { return EvaluateResidual(z, F); }
   PetscErrorCode NewtonMatrix(Vec z, Mat J);
+  // Pseudo-transient anchor: with rho > 0 the residual gets rho D (z - z_a)
+  // on the body and wall rows and the Newton matrix rho D, z_a the current
+  // state; rho = 0 removes the term (EndLoadStep does).
+  void SetAnchor(double rho);
+  double AnchorWeight() const { return rho_anchor_; }
+  // NCP function of the normal contact rows until the load step ends.
+  void UseNcpFunction(NcpFunction f) { ncp_now_ = f; }
   // Diagonal added by NewtonMatrix (floor) and the weights D of a shift on
   // the body and wall rows (1, r^2 on rigid rotations, 0 on other rows).
   PetscErrorCode ShiftDiagonals(Vec floor, Vec weight) const;
@@ -298,8 +282,18 @@ class CompactionProblem {
   PetscErrorCode ContactStepFraction(Vec dz, double *fraction);
   // The last residual evaluation met an inverted element.
   bool Inverted() const { return inverted_; }
-  // Largest unbalanced force of a residual (body and wall rows, torques / radius).
-  PetscErrorCode ForceResidual(Vec F, double *force) const;
+  // Largest unbalanced force of a residual (body and wall rows, torques /
+  // radius) and the natural index of its unknown (-1 if none).
+  PetscErrorCode ForceResidual(Vec F, double *force, PetscInt *where = nullptr) const;
+  // What a natural unknown is, for monitors: "wall", "deformable particle 3
+  // node 12", "rigid particle 5 dof 2", "gauge", "lambda_n", "lambda_t".
+  std::string DescribeUnknown(PetscInt natural) const;
+  // Natural index of a PETSc index.
+  PetscInt NaturalIndex(PetscInt petsc) const { return natural_of_[petsc]; }
+  // Prints (PetscSynchronizedPrintf, each rank its own contacts) every
+  // contact whose state differs from `before`, with its multipliers, gap and
+  // slip at the last residual evaluation; collective.
+  PetscErrorCode PrintChangedContacts(const std::vector<char> &before) const;
   // The trial state of an update d: zt = z + d, except that the mean rotation
   // theta of each deformable body's increment (about its centroid) is applied
   // as a finite rotation R(theta) instead of its linearization I + theta J.
@@ -407,13 +401,6 @@ class CompactionProblem {
   PetscInt PetscIndex(PetscInt natural) const { return petsc_of_[natural]; }
 
  private:
-  friend PetscErrorCode FormFunction(SNES, Vec, Vec, void *);
-  friend PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec, PetscBool *, void *);
-  friend PetscErrorCode Backtrack(SNESLineSearch, Vec, Vec, Vec, PetscBool *, PetscBool *, void *);
-  friend PetscErrorCode FormJacobian(SNES, Vec, Mat, Mat, void *);
-  friend PetscErrorCode NewtonMonitor(SNES, PetscInt, PetscReal, void *);
-  friend PetscErrorCode ConvergenceTest(SNES, PetscInt, PetscReal, PetscReal, PetscReal, SNESConvergedReason *, void *);
-
   // Kinematics of one candidate at state z, on at most kMaxDofs global unknowns (-1: absent).
   struct LocalContact {
     PairKinematics k;
@@ -425,7 +412,9 @@ class CompactionProblem {
     int beyond = 0;        // node-segment: the closest point left the pair's window (window_node)
   };
   void ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc, bool hessians = false) const;
-  PetscErrorCode SetUpLayout();      // sizes, Vec/Mat/SNES for the current candidate set
+  PetscErrorCode SetUpLayout();      // sizes, Vec/Mat/KSP for the current candidate set
+  PetscErrorCode FormResidual(Vec z, Vec F);
+  PetscErrorCode FormJacobian(Vec z, Mat J);
   PetscErrorCode DestroySolver();
   PetscErrorCode Gather(Vec z, bool full);  // z -> zall_ (natural order): everything, or own + ghost unknowns
   PetscErrorCode Assemble(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
@@ -479,30 +468,22 @@ class CompactionProblem {
   std::vector<PetscInt> natural_of_; // PETSc index -> natural unknown
   PetscInt own_lo_ = 0, own_hi_ = 0; // this rank's PETSc rows
   std::vector<int> particle_owner_;  // rank of each particle (empty: everything on rank 0)
-  Vec yall_ = nullptr;               // replicated Newton step (LimitStep), allocated with the layout
-  Vec work_ = nullptr;               // residual at trial points of Backtrack
-  Vec step_ = nullptr;               // the step of a trial point of Backtrack
-  bool backtrack_ = false;           // LimitStep found an active-set cycle: Backtrack this step
+  Vec yall_ = nullptr;               // replicated Newton step (ContactStepFraction), allocated with the layout
   VecScatter to_all_ = nullptr;     // whole state, natural order (once per solve: replicated copy)
   VecScatter to_local_ = nullptr;   // own + ghost unknowns only (every Newton iteration; reverse: residual)
   PetscInt n_ghost_ = 0;            // unknowns this rank reads but does not own
   bool partition_adopted_ = false;  // the last UpdatePartition changed the owners (-partition_view reports)
   Mat J_ = nullptr;
-  SNES snes_ = nullptr;
-  std::vector<char> active_now_, active_checked_;
-  std::vector<double> switch_margin_;  // per candidate: |lambda_n - c_n g| and ||trial| - mu a| (own contacts; see ConvergenceTest)
-  std::vector<double> gap_bound_;      // per candidate, at the last residual: gap and sum_a |dgap_a| (own contacts; see LimitStep)
-  std::vector<std::uint64_t> active_history_;  // hashes of the contact states of the last Newton iterates (LimitStep)
+  KSP ksp_ = nullptr;                // MUMPS LU (default) of the Newton matrix
+  std::vector<char> active_now_;
+  std::vector<double> switch_margin_;  // per candidate: |lambda_n - c_n g| and ||trial| - mu a| (own contacts; see ChangedStateMargin)
+  std::vector<double> gap_bound_;      // per candidate, at the last residual: gap and sum_a |dgap_a| (own contacts; see ContactStepFraction)
   bool inverted_ = false;
-  double fnorm0_ = 0.0;
   double rho_anchor_ = 0.0;         // pseudo-transient weight (0: plain Newton)
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
   std::vector<PetscScalar> coo_values_;
-  NcpFunction ncp_now_ = NcpFunction::Min;  // NCP function of the current inner solve (see Solve)
-  PetscBool monitor_outer_ = PETSC_FALSE;  // -ptc_monitor: one line per pseudo-time step
-  PetscBool monitor_contacts_ = PETSC_FALSE;  // -newton_monitor_contacts: contacts that changed state
-  std::vector<char> monitor_states_;          // their states at the previous Newton iterate
+  NcpFunction ncp_now_ = NcpFunction::Min;  // NCP function of the current load step (UseNcpFunction)
   int layouts_created_ = 0;         // SetUpLayout calls (symbolic factorizations)
   int layouts_at_step_ = 0;         // layouts_created_ at BeginLoadStep
   State step_saved_;                // the state at BeginLoadStep (restored by a failed step)
