@@ -1,11 +1,17 @@
 #!/usr/bin/env bash
 # Installs what deformix needs on Debian 12 (as root, idempotent, quiet when
 # everything is there) and builds it in Release into build/.
+#   bash scripts/setup.sh          what the build, the drivers and the scripts need
+#   bash scripts/setup.sh --tests  and what only the tests need (python3-meshio,
+#                                  the independent XDMF reader of tests/xdmf_tests.py)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 packages=(g++ make cmake pkg-config petsc-dev libmetis-dev libhdf5-openmpi-dev openmpi-bin libopenmpi-dev
           googletest libgtest-dev python3 python3-numpy python3-scipy python3-matplotlib python3-h5py)
+if [ "${1:-}" = "--tests" ]; then
+  packages+=(python3-meshio)
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,6 +1,9 @@
 #include "deformix/observables.hpp"
 
 #include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
 #include <set>
 #include <utility>
 
@@ -79,6 +82,55 @@ PackingObservables ComputeObservables(const CompactionProblem &problem) {
   }
   if (!problem.Bodies().empty()) o.mean_volumetric_strain = strain / problem.Bodies().size();
   return o;
+}
+
+ForceNetwork ComputeForceNetwork(const CompactionProblem &problem) {
+  const int np = problem.NumParticles();
+  std::vector<double> centre(2 * np, 0.0);
+  for (int b = 0; b < static_cast<int>(problem.Bodies().size()); ++b)
+    problem.BodyCentroid(b, &centre[2 * problem.Bodies()[b].particle]);
+  for (int r = 0; r < static_cast<int>(problem.RigidBodies().size()); ++r)
+    problem.RigidPosition(r, &centre[2 * problem.RigidBodies()[r].particle], nullptr);
+  const double *w = problem.Walls();
+  const double carrying = 1e-5 * problem.Pressure() * problem.MeanDiameter();  // as for Z (ComputeObservables)
+  // Sum of the forces on the slave per (slave, master) pair; walls are
+  // masters -1..-4 (left, right, bottom, top: the wall nearest the contact point).
+  std::map<std::pair<int, int>, std::array<double, 2>> sum;
+  for (const ContactForce &f : problem.ContactForces()) {
+    if (!(f.normal_multiplier > 0.0)) continue;
+    int master = f.master_particle;
+    if (master < 0) {
+      const double d[4] = {std::abs(f.point[0] - w[kLeft]), std::abs(w[kRight] - f.point[0]),
+                           std::abs(f.point[1] - w[kBottom]), std::abs(w[kTop] - f.point[1])};
+      master = -1 - static_cast<int>(std::min_element(d, d + 4) - d);
+    }
+    std::array<double, 2> &s = sum[{f.slave_particle, master}];
+    s[0] += f.force[0], s[1] += f.force[1];
+  }
+  ForceNetwork net;
+  for (const auto &[pair, F] : sum) {
+    const auto [slave, master] = pair;
+    const double *xs = &centre[2 * slave];
+    double xm[2];
+    if (master >= 0) {
+      xm[0] = centre[2 * master], xm[1] = centre[2 * master + 1];
+    } else {
+      const int wall = -1 - master;
+      xm[0] = wall == kLeft ? w[kLeft] : wall == kRight ? w[kRight] : xs[0];
+      xm[1] = wall == kBottom ? w[kBottom] : wall == kTop ? w[kTop] : xs[1];
+    }
+    double n[2] = {xs[0] - xm[0], xs[1] - xm[1]};
+    const double len = std::hypot(n[0], n[1]);
+    if (!(len > 0.0)) continue;
+    n[0] /= len, n[1] /= len;
+    const double fn = F[0] * n[0] + F[1] * n[1];
+    if (!(fn > carrying)) continue;
+    net.points.insert(net.points.end(), {xs[0], xs[1], xm[0], xm[1]});
+    net.particles.insert(net.particles.end(), {slave, master});
+    net.normal_force.push_back(fn);
+    net.tangential_force.push_back(-F[0] * n[1] + F[1] * n[0]);
+  }
+  return net;
 }
 
 }  // namespace deformix

@@ -5,6 +5,9 @@
 #include <cstring>
 #include <unistd.h>
 
+#include "deformix/observables.hpp"
+#include "deformix/xdmf.hpp"
+
 namespace deformix {
 
 CsvWriter::~CsvWriter() {
@@ -74,6 +77,92 @@ herr_t WriteAttribute(hid_t obj, const char *name, double v) {
   herr_t st = (attr < 0) ? -1 : H5Awrite(attr, H5T_NATIVE_DOUBLE, &v);
   if (attr >= 0) H5Aclose(attr);
   H5Sclose(space);
+  return st;
+}
+
+
+// The datasets the XDMF file (WriteLevelsXdmf) shows, in one piece per kind
+// (every deformable disk in one mesh), from the replicated state; rank 0
+// writes the data, every rank takes part in the creation (collective).
+herr_t WriteViewerDatasets(hid_t level, const CompactionProblem &problem, bool writer) {
+  herr_t st = 0;
+  const std::vector<DeformableBody> &bodies = problem.Bodies();
+  // Box outline: corners (left, bottom), (right, bottom), (right, top), (left, top).
+  {
+    const double *w = problem.Walls();
+    const double corners[8] = {w[kLeft], w[kBottom], w[kRight], w[kBottom], w[kRight], w[kTop], w[kLeft], w[kTop]};
+    const int sides[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+    hid_t g = H5Gcreate2(level, "box", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    if (g < 0 || WriteDataset(g, "points", H5T_NATIVE_DOUBLE, 4, 2, writer ? corners : nullptr) < 0 ||
+        WriteDataset(g, "segments", H5T_NATIVE_INT, 4, 2, writer ? sides : nullptr) < 0)
+      st = -1;
+    if (g >= 0) H5Gclose(g);
+  }
+  if (!bodies.empty()) {
+    int nn = 0, nc = 0;
+    for (const DeformableBody &b : bodies) nn += b.mesh.num_nodes(), nc += b.mesh.num_cells();
+    const int nen = bodies[0].mesh.nodes_per_cell();
+    std::vector<double> x, u, strain;
+    std::vector<int> cells, particle;
+    if (writer) {
+      const std::vector<double> &disp = problem.Displacements();
+      int first = 0;
+      for (int b = 0; b < static_cast<int>(bodies.size()); ++b) {
+        const DeformableBody &body = bodies[b];
+        for (int a = 0; a < body.mesh.num_nodes(); ++a) {
+          double p[2];
+          problem.NodePosition(b, a, p);
+          x.insert(x.end(), {p[0], p[1]});
+          u.insert(u.end(), {disp[body.dof_offset + 2 * a], disp[body.dof_offset + 2 * a + 1]});
+        }
+        for (int n : body.mesh.cells) cells.push_back(first + n);
+        for (double J : problem.CellAreaRatio(b)) strain.push_back(J - 1.0), particle.push_back(body.particle);
+        first += body.mesh.num_nodes();
+      }
+    }
+    hid_t g = H5Gcreate2(level, "mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    if (g < 0 || WriteDataset(g, "coordinates", H5T_NATIVE_DOUBLE, nn, 2, writer ? x.data() : nullptr) < 0 ||
+        WriteDataset(g, "displacement", H5T_NATIVE_DOUBLE, nn, 2, writer ? u.data() : nullptr) < 0 ||
+        WriteDataset(g, "cells", H5T_NATIVE_INT, nc, nen, writer ? cells.data() : nullptr) < 0 ||
+        WriteDataset(g, "volumetric_strain", H5T_NATIVE_DOUBLE, nc, 1, writer ? strain.data() : nullptr) < 0 ||
+        WriteDataset(g, "particle", H5T_NATIVE_INT, nc, 1, writer ? particle.data() : nullptr) < 0)
+      st = -1;
+    if (g >= 0) H5Gclose(g);
+  }
+  const std::vector<RigidBody> &rigid = problem.RigidBodies();
+  if (!rigid.empty()) {
+    const int n = static_cast<int>(rigid.size());
+    std::vector<double> c(2 * n), radius(n), rotation(n);
+    std::vector<int> index(n), particle(n);
+    for (int r = 0; r < n; ++r) {
+      problem.RigidPosition(r, &c[2 * r], &rotation[r]);
+      radius[r] = rigid[r].radius, index[r] = r, particle[r] = rigid[r].particle;
+    }
+    hid_t g = H5Gcreate2(level, "disks", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    if (g < 0 || WriteDataset(g, "centers", H5T_NATIVE_DOUBLE, n, 2, writer ? c.data() : nullptr) < 0 ||
+        WriteDataset(g, "vertices", H5T_NATIVE_INT, n, 1, writer ? index.data() : nullptr) < 0 ||
+        WriteDataset(g, "radius", H5T_NATIVE_DOUBLE, n, 1, writer ? radius.data() : nullptr) < 0 ||
+        WriteDataset(g, "rotation", H5T_NATIVE_DOUBLE, n, 1, writer ? rotation.data() : nullptr) < 0 ||
+        WriteDataset(g, "particle", H5T_NATIVE_INT, n, 1, writer ? particle.data() : nullptr) < 0)
+      st = -1;
+    if (g >= 0) H5Gclose(g);
+  }
+  // Contact network. Every rank computes it from the replicated state (the
+  // sizes must agree for the collective creation).
+  const ForceNetwork net = ComputeForceNetwork(problem);
+  const int m = net.segments();
+  if (m > 0) {
+    std::vector<int> seg(2 * m);
+    for (int i = 0; i < 2 * m; ++i) seg[i] = i;
+    hid_t g = H5Gcreate2(level, "contacts", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    if (g < 0 || WriteDataset(g, "points", H5T_NATIVE_DOUBLE, 2 * m, 2, writer ? net.points.data() : nullptr) < 0 ||
+        WriteDataset(g, "segments", H5T_NATIVE_INT, m, 2, writer ? seg.data() : nullptr) < 0 ||
+        WriteDataset(g, "particles", H5T_NATIVE_INT, m, 2, writer ? net.particles.data() : nullptr) < 0 ||
+        WriteDataset(g, "normal_force", H5T_NATIVE_DOUBLE, m, 1, writer ? net.normal_force.data() : nullptr) < 0 ||
+        WriteDataset(g, "tangential_force", H5T_NATIVE_DOUBLE, m, 1, writer ? net.tangential_force.data() : nullptr) < 0)
+      st = -1;
+    if (g >= 0) H5Gclose(g);
+  }
   return st;
 }
 
@@ -153,6 +242,7 @@ PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level,
                            rank == 0 ? xr.data() : nullptr) < 0)
             ok = 0;
         }
+        if (WriteViewerDatasets(g, problem, rank == 0) < 0) ok = 0;
         H5Gclose(g);
       }
       if (H5Fclose(file) < 0) ok = 0;
@@ -161,6 +251,7 @@ PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level,
   H5Pclose(fapl);
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &ok, 1, MPI_INT, MPI_MIN, comm));
   PetscCheck(ok, comm, PETSC_ERR_FILE_WRITE, "writing level %d to %s failed", level, path.c_str());
+  PetscCall(WriteLevelsXdmf(comm, path));
   PetscFunctionReturn(0);
 }
 
@@ -188,6 +279,10 @@ PetscErrorCode TruncateLevelsHDF5(MPI_Comm comm, const std::string &path, int fi
   PetscCallMPI(MPI_Bcast(&ok, 1, MPI_INT, 0, comm));
   PetscCheck(ok, comm, PETSC_ERR_FILE_WRITE, "%s: cannot remove the levels from %d on (restart); move the file away",
              path.c_str(), first);
+  int exists = 0;
+  if (rank == 0) exists = access(path.c_str(), F_OK) == 0;
+  PetscCallMPI(MPI_Bcast(&exists, 1, MPI_INT, 0, comm));
+  if (exists) PetscCall(WriteLevelsXdmf(comm, path));
   PetscFunctionReturn(0);
 }
 

@@ -38,4 +38,21 @@ struct PackingObservables {
 
 PackingObservables ComputeObservables(const CompactionProblem &problem);
 
+// The contact network (force chains): one segment per force-carrying
+// particle pair, between the two particle centres (rigid centres, deformable
+// centroids), and one per particle-wall pair, from the particle centre to
+// the foot of the perpendicular on the wall. The forces of the pair's
+// contacts (several nodes of a deformable disk) are summed; normal_force is
+// the component of that force on the slave along the unit vector from the
+// master's centre (or the wall) to the slave's (compression positive),
+// tangential_force the component along that vector turned by +90 degrees.
+// Pairs whose normal force is at most 1e-5 P <d> are left out (as for Z).
+struct ForceNetwork {
+  std::vector<double> points;  // 2 per segment: (x, y) of its two ends, i.e. 4 values per segment
+  std::vector<int> particles;  // 2 per segment: slave particle, master particle (-1..-4: left, right, bottom, top wall)
+  std::vector<double> normal_force, tangential_force;
+  int segments() const { return static_cast<int>(normal_force.size()); }
+};
+ForceNetwork ComputeForceNetwork(const CompactionProblem &problem);
+
 }  // namespace deformix

@@ -9,6 +9,15 @@
 //     /body_K/cells        connectivity (n_cells x nodes per cell)
 //     /body_K/cell_area_ratio   current / reference area per cell (J)
 //     /rigid               rigid disks (n_rigid x 4): x, y, radius, rotation
+//   and, for viewers (xdmf.hpp: levels.xdmf beside the file),
+//     /box/points, segments          the walls as four segments
+//     /mesh/coordinates, displacement, cells, volumetric_strain, particle
+//                          every deformable disk in one mesh (node numbers
+//                          offset body by body, in body order)
+//     /disks/centers, vertices, radius, rotation, particle   rigid disks
+//     /contacts/points, segments, particles, normal_force, tangential_force
+//                          the contact network (observables.hpp,
+//                          ComputeForceNetwork), absent without contact force
 // The CSV is written by rank 0. The HDF5 file is written in parallel (MPI-IO):
 // each body's datasets by the rank owning it, the rest by rank 0; the file
 // layout does not depend on the number of ranks.
@@ -42,11 +51,12 @@ class CsvWriter {
 PetscErrorCode RemoveFile(MPI_Comm comm, const std::string &path);
 
 // Appends level `level` to the HDF5 file `path` (created at level 0, or
-// when it does not exist). Collective on comm.
+// when it does not exist) and rewrites the XDMF file beside it. Collective on comm.
 PetscErrorCode WriteLevelHDF5(MPI_Comm comm, const std::string &path, int level, double P_over_E,
                               const CompactionProblem &problem);
 // Removes the groups of levels `first`, first + 1, ... from `path`, if it
-// exists: a run restarted from an earlier checkpoint rewrites them.
+// exists (and rewrites its XDMF file): a run restarted from an earlier
+// checkpoint rewrites them.
 PetscErrorCode TruncateLevelsHDF5(MPI_Comm comm, const std::string &path, int first);
 
 }  // namespace deformix
