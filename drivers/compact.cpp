@@ -4,7 +4,8 @@ static const char help[] =
     "sections II-IV).\n\n"
     "Protocol: n_particles rigid disks (diameters in [0.8, 1.2], uniform area fraction per diameter)\n"
     "are packed to the frictionless jammed state phi_0 (soft-disk FIRE compression to vanishing\n"
-    "overlap); a fraction kappa of the particle area is turned deformable, homogeneously in space;\n"
+    "overlap); a fraction kappa of the particle area is turned deformable, homogeneously in space\n"
+    "(or -packing FILE: the disks of a CSV file with the columns of packing.csv);\n"
     "it is settled into exact contact without friction at min(P_1, 1e-4 E) (with -constrain_rotation\n"
     "the deformable disks' mean rotation held by gauges), then friction is switched on (gauges\n"
     "released; -settle_frictionless); each level of -pressures (P/E) is reached quasistatically in one\n"
@@ -67,10 +68,13 @@ struct CompactOptions {
   PetscBool settle_rigid = PETSC_TRUE;
   PetscBool checkpoint = PETSC_TRUE;
   std::string restart;  // checkpoint to continue from ("" : a new run)
+  std::string packing;  // user packing (CSV) instead of the generated one ("" : generate)
 };
 
 PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
   PetscFunctionBeginUser;
+  char file[PETSC_MAX_PATH_LEN] = "";
+  PetscBool has_packing = PETSC_FALSE;
   PetscOptionsBegin(comm, nullptr, "Mixture compaction", "deformix");
   PetscCall(PetscOptionsInt("-n_particles", "number of disks N_p", "", o->n_particles, &o->n_particles, nullptr));
   PetscCall(PetscOptionsReal("-kappa", "mixture ratio: deformable area / total particle area, in [0, 1]", "", o->kappa,
@@ -88,7 +92,21 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
   PetscCall(PetscOptionsBool("-settle_frictionless",
                              "settle the packing without friction at min(first level, 1e-4 E), then switch friction on, solve again and step to the first level", "",
                              o->settle_frictionless, &o->settle_frictionless, nullptr));
+  PetscCall(PetscOptionsString("-packing",
+                               "run on the disks of a CSV file (columns x, y, radius, deformable as in packing.csv; "
+                               "walls on their bounding box) instead of generating a packing",
+                               "", file, file, sizeof(file), &has_packing));
   PetscOptionsEnd();
+  if (has_packing) {
+    PetscCheck(file[0] != '\0', comm, PETSC_ERR_USER_INPUT, "-packing needs a file name");
+    for (const char *other : {"-n_particles", "-kappa", "-seed"}) {
+      PetscBool set = PETSC_FALSE;
+      PetscCall(PetscOptionsHasName(nullptr, nullptr, other, &set));
+      PetscCheck(!set, comm, PETSC_ERR_USER_INPUT,
+                 "%s cannot be combined with -packing: the file gives the disks and which of them are deformable", other);
+    }
+    o->packing = file;
+  }
   PetscCheck(o->n_particles >= 1 && o->n_particles <= 200000, comm, PETSC_ERR_USER_INPUT,
              "-n_particles %" PetscInt_FMT ": give between 1 and 200000 particles", o->n_particles);
   PetscCheck(o->kappa >= 0.0 && o->kappa <= 1.0, comm, PETSC_ERR_USER_INPUT,
@@ -182,6 +200,24 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(load.SetFromOptions(comm));
   if (HelpRequested()) PetscFunctionReturn(0);
   PetscCall(CheckUnknownOptions(comm));
+  // A user packing is read (and refused if bad) before anything is written;
+  // its size and deformable area fraction stand for -n_particles and -kappa.
+  DiskPacking user_packing;
+  if (!opts.packing.empty()) {
+    try {
+      user_packing = read_packing_csv(opts.packing);
+    } catch (const std::exception &e) {
+      SETERRQ(comm, PETSC_ERR_USER_INPUT, "-packing: %s", e.what());
+    }
+    double area = 0.0, deformable_area = 0.0;
+    for (int i = 0; i < user_packing.size(); ++i) {
+      const double a = M_PI * user_packing.radius[i] * user_packing.radius[i];
+      area += a, deformable_area += user_packing.deformable[i] ? a : 0.0;
+    }
+    opts.n_particles = user_packing.size();
+    opts.kappa = deformable_area / area;
+    opts.seed = 0;
+  }
   // The options that define the bodies and unknowns: a restart must repeat them.
   const Scene scene = {{"n_particles", double(opts.n_particles)},
                        {"kappa", opts.kappa},
@@ -211,7 +247,9 @@ PetscErrorCode Run(MPI_Comm comm) {
   DiskPacking packing = restart.packing;
   DiskMesh unit_mesh;
   try {
-    if (!restarting) {
+    if (!restarting && !opts.packing.empty()) {
+      packing = user_packing;
+    } else if (!restarting) {
       packing = make_jammed_packing(static_cast<int>(opts.n_particles), static_cast<unsigned>(opts.seed), PackingOptions());
       assign_deformable(packing, opts.kappa, static_cast<unsigned>(opts.seed));
     }
@@ -267,11 +305,13 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(WritePackingCsv(comm, opts.output_dir + "/packing.csv", packing));
   PetscCall(PetscPrintf(comm,
                         "compact: %d particles (%d deformable, %d triangles each; %d rigid), kappa = %g, friction = %g,"
-                        " E = %g, nu = %g, seed %d\n"
-                        "  jammed rigid packing (frictionless): phi_0 = %.4f, Z_0 without rattlers = %.3f between particles"
+                        " E = %g, nu = %g, %s%s\n"
+                        "  initial packing (rigid disks): phi_0 = %.4f, Z_0 without rattlers = %.3f between particles"
                         " (%.3f with wall contacts counted twice), rattlers %.1f %%\n",
                         packing.size(), n_deformable, unit_mesh.num_cells(), packing.size() - n_deformable,
-                        (double)opts.kappa, params.friction, params.young, params.poisson, (int)opts.seed,
+                        (double)opts.kappa, params.friction, params.young, params.poisson,
+                        opts.packing.empty() ? "seed " : "packing ",
+                        opts.packing.empty() ? std::to_string(opts.seed).c_str() : opts.packing.c_str(),
                         phi0, z0_no_rattlers, z0_mirror, 100.0 * rattlers0));
   if (restarting)
     PetscCall(PetscPrintf(comm, "  restart from %s: %zu level(s) done (last P/E = %g), continuing with P/E = %g\n",

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <fstream>
 #include <limits>
 #include <numeric>
 #include <random>
@@ -446,6 +447,89 @@ DiskPacking make_jammed_packing(int n, unsigned seed, const PackingOptions &opts
   p.walls[1] = s.Lx;
   p.walls[2] = 0;
   p.walls[3] = s.Ly;
+  return p;
+}
+
+DiskPacking read_packing_csv(const std::string &path, double overlap_tol) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot read the packing file '" + path + "'");
+  const auto split = [](const std::string &line) {
+    std::vector<std::string> out;
+    std::string field;
+    std::istringstream ss(line);
+    while (std::getline(ss, field, ',')) {
+      const size_t a = field.find_first_not_of(" \t\r"), b = field.find_last_not_of(" \t\r");
+      out.push_back(a == std::string::npos ? "" : field.substr(a, b - a + 1));
+    }
+    if (!line.empty() && line.back() == ',') out.push_back("");
+    return out;
+  };
+  std::string line;
+  if (!std::getline(in, line) || line.find_first_not_of(" \t\r") == std::string::npos)
+    throw std::runtime_error("packing file '" + path + "' is empty: expected a header x,y,radius,deformable and one row per disk");
+  const std::vector<std::string> header = split(line);
+  const char *const names[4] = {"x", "y", "radius", "deformable"};
+  int column[4] = {-1, -1, -1, -1};
+  for (size_t c = 0; c < header.size(); ++c) {
+    int k = 0;
+    while (k < 4 && header[c] != names[k]) ++k;
+    if (k == 4)
+      throw std::runtime_error("packing file '" + path + "': unknown column '" + header[c] +
+                               "' (the columns are x, y, radius, deformable)");
+    if (column[k] >= 0) throw std::runtime_error("packing file '" + path + "': column '" + header[c] + "' appears twice");
+    column[k] = static_cast<int>(c);
+  }
+  for (int k = 0; k < 4; ++k)
+    if (column[k] < 0)
+      throw std::runtime_error("packing file '" + path + "': no column '" + names[k] +
+                               "' (the columns are x, y, radius, deformable)");
+  DiskPacking p;
+  int row = 1;
+  while (std::getline(in, line)) {
+    ++row;
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    const std::vector<std::string> f = split(line);
+    std::ostringstream where;
+    where << "packing file '" << path << "', line " << row;
+    if (f.size() != header.size())
+      throw std::runtime_error(where.str() + ": " + std::to_string(f.size()) + " fields for " +
+                               std::to_string(header.size()) + " columns");
+    double v[4];
+    for (int k = 0; k < 4; ++k) {
+      const std::string &t = f[column[k]];
+      size_t used = 0;
+      try {
+        v[k] = std::stod(t, &used);
+      } catch (const std::exception &) {
+        used = 0;
+      }
+      if (t.empty() || used != t.size() || !std::isfinite(v[k]))
+        throw std::runtime_error(where.str() + ": " + names[k] + " '" + t + "' is not a finite number");
+    }
+    if (!(v[2] > 0.0)) throw std::runtime_error(where.str() + ": radius " + f[column[2]] + " must be positive");
+    if (v[3] != 0.0 && v[3] != 1.0)
+      throw std::runtime_error(where.str() + ": deformable " + f[column[3]] + " must be 0 (rigid) or 1 (deformable)");
+    p.x.push_back(v[0]), p.y.push_back(v[1]), p.radius.push_back(v[2]), p.deformable.push_back(v[3] != 0.0);
+  }
+  const int n = p.size();
+  if (n == 0) throw std::runtime_error("packing file '" + path + "' has a header but no disk");
+  p.walls[0] = p.walls[2] = INFINITY;
+  p.walls[1] = p.walls[3] = -INFINITY;
+  double dmean = 0.0;
+  for (int i = 0; i < n; ++i) {
+    p.walls[0] = std::min(p.walls[0], p.x[i] - p.radius[i]), p.walls[1] = std::max(p.walls[1], p.x[i] + p.radius[i]);
+    p.walls[2] = std::min(p.walls[2], p.y[i] - p.radius[i]), p.walls[3] = std::max(p.walls[3], p.y[i] + p.radius[i]);
+    dmean += 2.0 * p.radius[i] / n;
+  }
+  const ContactNetwork close = contact_network(p, -overlap_tol * dmean);
+  for (int c = 0; c < close.size(); ++c)
+    if (close.j[c] >= 0) {
+      std::ostringstream msg;
+      msg << "packing file '" << path << "': disks " << close.i[c] << " and " << close.j[c] << " (rows "
+          << close.i[c] + 2 << " and " << close.j[c] + 2 << ") overlap by " << -close.gap[c] << ", more than "
+          << overlap_tol << " times the mean diameter";
+      throw std::runtime_error(msg.str());
+    }
   return p;
 }
 

@@ -20,6 +20,10 @@ Cases
                     later levels of levels.h5; bad checkpoints and options that do
                     not fit the checkpoint are refused with a clear message and
                     leave the existing results byte-identical
+  packing           -packing FILE: a 3 x 3 square lattice of equal rigid disks read from
+                    a CSV file keeps phi = pi/4 with P d at every contact; bad files
+                    (empty, missing or unknown column, text, radius <= 0, overlaps)
+                    are refused with a clear message before anything is written
   progress          12 disks: with -progress_interval 0 a progress line follows every
                     pseudo-time step, on 1 and on 2 ranks (printed once); the last
                     line of each sub-step counts its Newton iterations, and per
@@ -198,6 +202,69 @@ def restart_case(driver, workdir, mpiexec):
               f"existing results byte-identical (changed: {mismatch + errors})")
 
 
+def packing_case(driver, workdir):
+    """-packing FILE: a 3 x 3 square lattice of equal rigid disks (d = 1) read
+    from a CSV file keeps phi = pi/4 and carries P d at every contact (pairs
+    and walls), with friction; bad files are refused before anything is written."""
+    import h5py
+    import math
+    lattice = os.path.join(workdir, "lattice.csv")
+    with open(lattice, "w") as f:
+        f.write("radius,x,y,deformable\n")  # any column order
+        for i in range(3):
+            for j in range(3):
+                f.write(f"0.5,{i + 0.5},{j + 0.5},0\n")
+    out = os.path.join(workdir, "lattice")
+    shutil.rmtree(out, ignore_errors=True)
+    levels = [1e-3, 1e-2]
+    cmd = [driver, "-packing", lattice, "-friction", "0.3", "-pressures", ",".join(map(str, levels)), "-output_dir", out]
+    print("$ " + " ".join(cmd))
+    p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=300)
+    print(p.stdout)
+    if check(p.returncode == 0, f"lattice run: exit code {p.returncode}"):
+        rows = read_curve(out)
+        check(len(rows) == 2, "two levels")
+        for r in rows:
+            check(abs(float(r["phi"]) - math.pi / 4) <= 1e-10, f"phi {r['phi']} = pi/4")
+        with h5py.File(os.path.join(out, "levels.h5"), "r") as h5:
+            for name, P in zip(sorted(h5), levels):
+                fn = h5[name]["contacts/normal_force"][()]
+                pairs = h5[name]["contacts/particles"][()]
+                check(len(fn) == 24 and (pairs[:, 1] >= 0).sum() == 12,
+                      f"P/E {P}: 12 pair and 12 wall contacts carry force ({len(fn)} segments)")
+                check(abs(fn - P).max() <= 1e-6 * P, f"P/E {P}: every contact carries P d (worst {abs(fn - P).max() / P:.1e} P)")
+        with open(os.path.join(out, "packing.csv")) as f:
+            check(len(f.readlines()) == 10, "packing.csv repeats the nine disks")
+    bad = {
+        "empty.csv": ("", "is empty"),
+        "header_only.csv": ("x,y,radius,deformable\n", "has a header but no disk"),
+        "missing.csv": ("x,y,radius\n0.5,0.5,0.5\n", "no column 'deformable'"),
+        "unknown.csv": ("x,y,radius,deformable,z\n0.5,0.5,0.5,0,1\n", "unknown column 'z'"),
+        "text.csv": ("x,y,radius,deformable\n0.5,abc,0.5,0\n", "y 'abc' is not a finite number"),
+        "radius.csv": ("x,y,radius,deformable\n0.5,0.5,0,0\n", "radius 0 must be positive"),
+        "flag.csv": ("x,y,radius,deformable\n0.5,0.5,0.5,2\n", "must be 0 (rigid) or 1 (deformable)"),
+        "fields.csv": ("x,y,radius,deformable\n0.5,0.5,0.5\n", "3 fields for 4 columns"),
+        "overlap.csv": ("x,y,radius,deformable\n0.5,0.5,0.5,0\n1.4,0.5,0.5,1\n", "disks 0 and 1 (rows 2 and 3) overlap by 0.1"),
+    }
+    target = os.path.join(workdir, "refused")
+    for name, (text, expect) in bad.items():
+        path = os.path.join(workdir, name)
+        with open(path, "w") as f:
+            f.write(text)
+        shutil.rmtree(target, ignore_errors=True)
+        p = subprocess.run([driver, "-packing", path, "-output_dir", target], stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True, timeout=60)
+        check(p.returncode != 0, f"{name}: refused (exit code {p.returncode})")
+        check(expect in p.stdout, f"{name}: message contains '{expect}'")
+        check(not os.path.exists(target), f"{name}: nothing written")
+    p = subprocess.run([driver, "-packing", os.path.join(workdir, "nowhere.csv"), "-output_dir", target],
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=60)
+    check(p.returncode != 0 and "cannot read the packing file" in p.stdout, "a missing file is refused")
+    p = subprocess.run([driver, "-packing", lattice, "-kappa", "0.5", "-output_dir", target],
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=60)
+    check(p.returncode != 0 and "-kappa cannot be combined with -packing" in p.stdout, "-kappa with -packing is refused")
+
+
 PROGRESS_RE = re.compile(r"^    \.\.\. P/E (\S+): pseudo-time step (\d+), (\d+) Newton its, \|F\|_inf (\S+) P<d>")
 
 
@@ -242,7 +309,7 @@ def main():
     ap.add_argument("--driver", required=True)
     ap.add_argument("--workdir", required=True)
     ap.add_argument("--mpiexec", default="mpirun")
-    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart", "progress"])
+    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart", "progress", "packing"])
     a = ap.parse_args()
     os.makedirs(a.workdir, exist_ok=True)
     if a.case == "friction-to-half":
@@ -272,6 +339,8 @@ def main():
         restart_case(a.driver, a.workdir, a.mpiexec)
     elif a.case == "progress":
         progress_case(a.driver, a.workdir, a.mpiexec)
+    elif a.case == "packing":
+        packing_case(a.driver, a.workdir)
     else:
         rows = run_compact(a.driver, os.path.join(a.workdir, "jump"), [0.1], timeout=900)
         ref = run_compact(a.driver, os.path.join(a.workdir, "stepped"), [1e-4, 1e-3, 0.01, 0.05, 0.1], timeout=900)

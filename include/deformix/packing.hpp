@@ -21,6 +21,7 @@
 //    homogeneously in space.
 // Everything is deterministic for a given seed.
 #pragma once
+#include <string>
 #include <vector>
 
 namespace deformix {
@@ -82,6 +83,16 @@ DiskPacking make_jammed_packing(int n, unsigned seed, const PackingOptions &opts
 // stretch of the curve (e.g. each quadrant of the box) is within ~a_max of
 // its own target. Replaces any previous marking.
 void assign_deformable(DiskPacking &packing, double kappa, unsigned seed);
+
+// A packing from a CSV file with the columns of compact's packing.csv: a
+// header naming x, y, radius and deformable (0 or 1) in any order, then one
+// row per disk. The walls are the disks' bounding box. Throws
+// std::runtime_error, saying what is wrong and where, for an unreadable or
+// empty file, a missing, repeated or unknown column, a row with the wrong
+// number of fields, a value that is not a finite number, a radius <= 0, a
+// deformable flag other than 0 or 1, and two disks overlapping by more than
+// overlap_tol times their mean diameter.
+DiskPacking read_packing_csv(const std::string &path, double overlap_tol = 1e-6);
 
 // Packing fraction of rigid disks: sum of disk areas / box area.
 double packing_fraction(const DiskPacking &packing);
