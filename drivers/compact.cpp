@@ -192,9 +192,10 @@ PetscErrorCode Run(MPI_Comm comm) {
   // min it takes 1340 (nts: 2893). 50-disk campaign: docs/validation.md.
   params.deformable_contact = DeformableContact::Mortar;
   params.ptc_retry_fb = PETSC_FALSE;
-  PetscBool has_ls = PETSC_FALSE;
-  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-snes_linesearch_type", &has_ls));
-  if (!has_ls) PetscCall(PetscOptionsSetValue(nullptr, "-snes_linesearch_type", "basic"));
+  // Full Newton steps inside each pseudo-time step (their length is limited
+  // by -newton_max_move and the contact step fraction instead);
+  // -snes_linesearch_type overrides it.
+  load.level.line_search = SNESLINESEARCHBASIC;
   PetscCall(ProcessOptions(comm, &opts));
   PetscCall(params.SetFromOptions(comm));
   PetscCall(load.SetFromOptions(comm));

@@ -466,7 +466,7 @@ PetscErrorCode AnchoredContinuation::Attach() {
   PetscCall(SNESSetTolerances(snes_, 1e-11 * pp.young * p_.MeanDiameter(), 1e-30, 0.0, max_it, -1));
   SNESLineSearch ls;
   PetscCall(SNESGetLineSearch(snes_, &ls));
-  PetscCall(SNESLineSearchSetType(ls, SNESLINESEARCHBT));
+  PetscCall(SNESLineSearchSetType(ls, prm_.line_search));
   PetscCall(SNESSetFromOptions(snes_));
   if (prm_.newton_monitor || prm_.newton_monitor_contacts) PetscCall(SNESMonitorSet(snes_, Monitor, this, nullptr));
   PetscCall(SNESGetLineSearch(snes_, &ls));

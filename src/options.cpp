@@ -135,9 +135,37 @@ PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   PetscFunctionReturn(0);
 }
 
+namespace {
+
+// Errors in what the user gave (options, files) are reported as their one
+// message, "<program>: error: <message>", by the first rank that raises
+// them (rank 0 for collective checks); everything else gets PETSc's traceback.
+const char *program_name = "deformix";
+
+PetscErrorCode InputErrorHandler(MPI_Comm comm, int line, const char *fun, const char *file, PetscErrorCode n,
+                                 PetscErrorType p, const char *mess, void *ctx) {
+  const bool input = n == PETSC_ERR_USER_INPUT || n == PETSC_ERR_FILE_OPEN || n == PETSC_ERR_FILE_READ ||
+                     n == PETSC_ERR_FILE_UNEXPECTED || n == PETSC_ERR_ARG_WRONG || n == PETSC_ERR_ARG_OUTOFRANGE;
+  if (!input) return PetscTraceBackErrorHandler(comm, line, fun, file, n, p, mess, ctx);
+  if (p == PETSC_ERROR_INITIAL) {
+    PetscMPIInt rank = 0;
+    if (comm != MPI_COMM_NULL) MPI_Comm_rank(comm, &rank);
+    if (rank == 0) std::fprintf(stderr, "%s: error: %s\n", program_name, mess ? mess : "(no message)");
+  }
+  return n;
+}
+
+}  // namespace
+
 int RunDriver(int argc, char **argv, const char *help, PetscErrorCode (*run)(MPI_Comm)) {
   if (PetscInitialize(&argc, &argv, nullptr, help)) return 1;
+  if (argc > 0 && argv[0]) {
+    const char *slash = std::strrchr(argv[0], '/');
+    program_name = slash ? slash + 1 : argv[0];
+  }
+  PetscPushErrorHandler(InputErrorHandler, nullptr);
   const PetscErrorCode ierr = run(PETSC_COMM_WORLD);
+  PetscPopErrorHandler();
   const PetscErrorCode fin = PetscFinalize();
   return (ierr || fin) ? 1 : 0;
 }

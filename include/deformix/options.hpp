@@ -30,7 +30,10 @@ PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir);
 PetscErrorCode CheckUnknownOptions(MPI_Comm comm);
 
 // The common main() of the drivers: PetscInitialize, run, PetscFinalize; any
-// error (already printed by PETSc) becomes exit code 1.
+// error becomes exit code 1. Errors in the user's input (options, files:
+// PETSC_ERR_USER_INPUT, _FILE_OPEN, _FILE_READ, _FILE_UNEXPECTED, _ARG_WRONG,
+// _ARG_OUTOFRANGE) print one line, "<program>: error: <message>"; others
+// PETSc's traceback.
 int RunDriver(int argc, char **argv, const char *help, PetscErrorCode (*run)(MPI_Comm));
 
 // True when -help was given: drivers print their options and stop before running.
