@@ -219,6 +219,17 @@ PetscErrorCode Run(MPI_Comm comm) {
     opts.kappa = deformable_area / area;
     opts.seed = 0;
   }
+  {
+    const double n_def = std::ceil(opts.kappa * opts.n_particles);
+    PetscCall(CheckSceneMemory(comm, n_def, opts.mesh_triangles, opts.n_particles - n_def));
+  }
+  // At P = 0 the walls carry no load: the packing has no equilibrium that
+  // the level criterion (forces relative to P <d>) could measure.
+  for (size_t i = 0; i < opts.pressures.size(); ++i)
+    PetscCheck(opts.pressures[i] > 0.0, comm, PETSC_ERR_USER_INPUT,
+               "-pressures entry %zu is 0: compact's levels need P/E > 0 (the walls are held by the pressure alone); "
+               "start from a small value such as 1e-5",
+               i);
   // The options that define the bodies and unknowns: a restart must repeat them.
   const Scene scene = {{"n_particles", double(opts.n_particles)},
                        {"kappa", opts.kappa},

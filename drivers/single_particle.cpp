@@ -85,6 +85,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(load.SetFromOptions(comm));
   if (HelpRequested()) PetscFunctionReturn(0);
   PetscCall(CheckUnknownOptions(comm));
+  PetscCall(CheckSceneMemory(comm, 1.0, opts.mesh_triangles, 0.0));
   // The options that define the body and its unknowns: a restart must repeat them.
   const Scene scene = {{"mesh_triangles", double(opts.mesh_triangles)},
                        {"element_order", double(opts.element_order)},

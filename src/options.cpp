@@ -135,6 +135,30 @@ PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode CheckSceneMemory(MPI_Comm comm, double deformable_disks, double triangles_per_disk, double rigid_disks) {
+  PetscFunctionBeginUser;
+  // Measured at 92-triangle disks (1500-disk scene, 750 deformable: about
+  // 1.08 GiB on one rank, most of it MUMPS' LU factors): about 14 kB per
+  // triangle, growing a little faster than linearly with the mesh.
+  const double need = 14e3 * deformable_disks * triangles_per_disk + 2e3 * rigid_disks + 64.0 * (1 << 20);
+  // Physical memory of the nodes the run has: each rank counts its node's
+  // memory divided by the ranks sharing the node.
+  MPI_Comm node;
+  PetscMPIInt on_node;
+  PetscCallMPI(MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node));
+  PetscCallMPI(MPI_Comm_size(node, &on_node));
+  PetscCallMPI(MPI_Comm_free(&node));
+  const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+  double have = pages > 0 && page > 0 ? double(pages) * double(page) / on_node : INFINITY;
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &have, 1, MPI_DOUBLE, MPI_SUM, comm));
+  PetscCheck(need <= have, comm, PETSC_ERR_USER_INPUT,
+             "this scene would need about %.3g GiB (%.0f deformable disks of %.0f triangles, about 14 kB per "
+             "triangle for the Jacobian and its factors), more than the %.3g GiB of memory of the machine(s) running "
+             "it: use fewer -mesh_triangles or particles, or more nodes",
+             need / (1 << 30), deformable_disks, triangles_per_disk, have / (1 << 30));
+  PetscFunctionReturn(0);
+}
+
 namespace {
 
 // Errors in what the user gave (options, files) are reported as their one

@@ -29,6 +29,11 @@ PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir);
 // -pc_*, -mat_*, ...) are read later and pass by their prefix.
 PetscErrorCode CheckUnknownOptions(MPI_Comm comm);
 
+// Refuses, before anything is allocated, a scene whose Jacobian and LU
+// factors would not fit in the physical memory of the nodes the run has
+// (a rough estimate: about 14 kB per triangle of every deformable disk).
+PetscErrorCode CheckSceneMemory(MPI_Comm comm, double deformable_disks, double triangles_per_disk, double rigid_disks);
+
 // The common main() of the drivers: PetscInitialize, run, PetscFinalize; any
 // error becomes exit code 1. Errors in the user's input (options, files:
 // PETSC_ERR_USER_INPUT, _FILE_OPEN, _FILE_READ, _FILE_UNEXPECTED, _ARG_WRONG,
