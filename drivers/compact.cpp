@@ -27,7 +27,8 @@ static const char help[] =
     "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8   (1500 disks: not yet practical)\n"
     "  build/bin/compact -options_file petsc-options/default.opts -pressures 1e-4,1e-3,3e-3,0.01,0.02,0.03,0.05 \\\n"
     "      -restart out/compact/checkpoint.h5      (continue the default scene by one more level)\n\n"
-    "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
+    "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view; -settle_snes_*, -settle_ksp_*,\n"
+    "-settle_pc_* for the rigid pre-settling); -newton_monitor prints\n"
     "each Newton iteration with the numbers of closed and sliding contacts, -newton_monitor_contacts\n"
     "the contacts whose state changed (to see an active-set cycle), -ptc_monitor each\n"
     "pseudo-time step (residual by block, largest unbalanced force and where it acts), -level_monitor each\n"
@@ -292,6 +293,7 @@ PetscErrorCode Run(MPI_Comm comm) {
     rigid_params.ncp_scale = 1.0;
     CompactionProblem rigid(comm);
     PetscCall(rigid.SetParameters(rigid_params));
+    rigid.SetOptionsPrefix("settle_");  // its solver options: -settle_snes_*, -settle_ksp_*, -settle_pc_*
     DiskPacking all_rigid = packing;
     std::fill(all_rigid.deformable.begin(), all_rigid.deformable.end(), 0);
     rigid.AddPacking(all_rigid, unit_mesh);

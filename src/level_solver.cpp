@@ -455,6 +455,7 @@ PetscErrorCode AnchoredContinuation::Attach() {
   PetscCall(SNESCreate(comm_, &snes_));
   PetscCall(SNESSetType(snes_, SNESNEWTONLS));
   PetscCall(SNESSetKSP(snes_, ksp_));
+  if (!p_.OptionsPrefix().empty()) PetscCall(SNESSetOptionsPrefix(snes_, p_.OptionsPrefix().c_str()));
   PetscCall(SNESSetFunction(snes_, F_, Function, this));
   PetscCall(SNESSetJacobian(snes_, J_, J_, Jacobian, this));
   PetscCall(SNESSetConvergenceTest(snes_, Converged, this, nullptr));

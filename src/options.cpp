@@ -110,15 +110,16 @@ PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir) {
 
 PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   // Prefixes of options read after start-up: by the SNES / KSP / PC / Mat of
-  // each solve, the Jacobian (jac_), the ASM subdomain solvers (sub_), logging,
-  // viewers and PETSc's own run-time.
+  // each solve (settle_*: compact's rigid pre-settling), the Jacobian (jac_),
+  // the ASM subdomain solvers (sub_), logging, viewers and PETSc's own run-time.
   static const char *const later[] = {"snes_", "ksp_", "pc_", "mat_", "jac_", "log", "info", "options_", "malloc",
                                       "help", "version", "on_error", "no_signal_handler", "fp_trap", "memory_view",
                                       "viewer", "draw", "vec_", "petsc", "check_pointer", "device_", "root_device",
                                       "mpi", "start_in_debugger", "debugger", "stop_for_debugger",
                                       "history", "tmp", "shared_tmp", "not_shared_tmp", "skip_petscrc",
                                       "objects_dump", "checkstack", "get_total_flops", "use_gpu_aware_mpi", "saws",
-                                      "display", "nox", "x_virtual", "python", "dm_", "is_", "sf_", "options_file", "sub_"};
+                                      "display", "nox", "x_virtual", "python", "dm_", "is_", "sf_", "options_file", "sub_",
+                                      "settle_snes_", "settle_ksp_", "settle_pc_", "settle_mat_", "settle_sub_"};
   PetscInt n;
   char **names, **values;
   std::string unknown;

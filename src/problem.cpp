@@ -1032,6 +1032,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   // The Newton matrix is factored by MUMPS LU unless the options say
   // otherwise (-ksp_type, -pc_type, -pc_factor_mat_solver_type).
   PetscCall(KSPCreate(comm_, &ksp_));
+  if (!options_prefix_.empty()) PetscCall(KSPSetOptionsPrefix(ksp_, options_prefix_.c_str()));
   PetscCall(KSPSetOperators(ksp_, J_, J_));
   PetscCall(KSPSetType(ksp_, KSPPREONLY));
   PC pc;

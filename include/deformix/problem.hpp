@@ -269,6 +269,11 @@ class CompactionProblem {
   double AnchorWeight() const { return rho_anchor_; }
   // NCP function of the normal contact rows until the load step ends.
   void UseNcpFunction(NcpFunction f) { ncp_now_ = f; }
+  // Prefix of the options of this problem's solvers (KSP, PC, and the level
+  // solver's SNES): e.g. "settle_" for -settle_snes_*, -settle_ksp_*. Empty
+  // by default (-snes_*, -ksp_*). Takes effect with the next layout.
+  void SetOptionsPrefix(const std::string &prefix) { options_prefix_ = prefix; }
+  const std::string &OptionsPrefix() const { return options_prefix_; }
   // Diagonal added by NewtonMatrix (floor) and the weights D of a shift on
   // the body and wall rows (1, r^2 on rigid rotations, 0 on other rows).
   PetscErrorCode ShiftDiagonals(Vec floor, Vec weight) const;
@@ -484,6 +489,7 @@ class CompactionProblem {
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
   std::vector<PetscScalar> coo_values_;
   NcpFunction ncp_now_ = NcpFunction::Min;  // NCP function of the current load step (UseNcpFunction)
+  std::string options_prefix_;               // of the KSP (and the level solver's SNES)
   int layouts_created_ = 0;         // SetUpLayout calls (symbolic factorizations)
   int layouts_at_step_ = 0;         // layouts_created_ at BeginLoadStep
   State step_saved_;                // the state at BeginLoadStep (restored by a failed step)
