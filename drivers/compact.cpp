@@ -19,7 +19,8 @@ static const char help[] =
     "A level is accepted at exact equilibrium or by the paper's criterion: unbalanced forces\n"
     "<= -level_force_rtol x P <d>, phi settled to -level_phi_rtol, contact conditions exact.\n\n"
     "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (the state of every\n"
-    "level), <output_dir>/packing.csv (the initial packing) and <output_dir>/checkpoint.h5 (after\n"
+    "level, with the contact network) and levels.xdmf beside it (open it in ParaView: a time series\n"
+    "over the levels), <output_dir>/packing.csv (the initial packing) and <output_dir>/checkpoint.h5 (after\n"
     "every level: what -restart needs to continue the run exactly where it stopped).\n\n"
     "Examples:\n"
     "  build/bin/compact -options_file petsc-options/default.opts     (20 disks, a few seconds)\n"
@@ -41,11 +42,13 @@ static const char help[] =
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "deformix/checkpoint.hpp"
 #include "deformix/disk_mesh.hpp"
+#include "deformix/level_outputs.hpp"
 #include "deformix/load_controller.hpp"
 #include "deformix/observables.hpp"
 #include "deformix/options.hpp"
@@ -333,21 +336,15 @@ PetscErrorCode Run(MPI_Comm comm) {
                           opts.pressures[restart.levels.size()]));
 
   // 3. Levels: solve, measure, write.
-  CsvWriter curve;
-  PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv", kCurveColumns));
-  std::vector<std::vector<double>> rows = restart.rows;  // the curve so far (checkpoints repeat it)
-  for (const std::vector<double> &row : rows) PetscCall(curve.Row(row));
-  const std::string h5 = opts.output_dir + "/levels.h5";
-  // Results of an earlier run in this directory must not mix with this one;
-  // a restarted run keeps the levels before its checkpoint.
-  if (restarting) PetscCall(TruncateLevelsHDF5(comm, h5, static_cast<int>(rows.size())));
-  else PetscCall(RemoveFile(comm, h5));
+  LevelOutputs outputs;
+  PetscCall(outputs.Open(comm, {opts.output_dir, bool(opts.write_hdf5), bool(opts.checkpoint)}, kCurveColumns,
+                         restarting ? &restart : nullptr));
   PetscCall(PetscPrintf(comm, "  %9s %8s %6s %6s %10s %8s %7s %6s %6s %8s\n", "P/E", "phi", "Z", "Z_nr", "P_sig/P",
                         "K/E", "slide", "newton", "steps", "seconds"));
   double step = restarting ? restart.load_step : -1.0;
   double prev_phi = restarting ? restart.Value("previous_phi") : phi0;
   double prev_P = restarting ? restart.Value("previous_pressure") : 0.0;
-  for (size_t level = rows.size(); level < opts.pressures.size(); ++level) {
+  for (size_t level = outputs.LevelsDone(); level < opts.pressures.size(); ++level) {
     const double P_over_E = opts.pressures[level], P = P_over_E * params.young;
     LevelReport rep;
     PetscCall(PetscLogStagePush(stage_solve));
@@ -406,39 +403,38 @@ PetscErrorCode Run(MPI_Comm comm) {
                           P > 0 ? o.mean_stress / P : 0.0, K / params.young, o.sliding_contacts, rep.newton_its,
                           rep.substeps, rep.seconds));
     PetscCall(PetscLogStagePush(stage_output));
-    const double E = params.young;
-    rows.push_back({P_over_E, o.packing_fraction, o.coordination, o.coordination_no_rattlers, double(o.rattlers),
-                         o.stress[0] / E, o.stress[1] / E, o.stress[3] / E, o.mean_stress / E, K / E,
-                         o.mean_volumetric_strain, double(o.contacts), double(o.sliding_contacts),
-                         double(rep.newton_its), double(rep.substeps), double(rep.cuts), rep.seconds,
-                         o.max_penetration, double(rep.inner_solves), double(rep.layouts), double(sizes.total),
-                         double(sizes.rigid), double(sizes.deformable), double(sizes.tangential),
-                         double(sizes.normal), double(sizes.jacobian_nonzeros),
-                         rep.force_residual / (P * problem.MeanDiameter()), double(rep.relaxed_substeps),
-                         problem.Summary().max_gauge_torque / (P * problem.MeanDiameter() * problem.MeanDiameter()),
-                         double(rep.factorizations), balance.body_force / (P * problem.MeanDiameter()),
-                         balance.body_torque / (P * problem.MeanDiameter() * problem.MeanDiameter())});
-    PetscCall(curve.Row(rows.back()));
-    if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
-    if (opts.checkpoint) {
-      Checkpoint c;
-      c.driver = "compact";
-      c.scene = scene;
-      c.columns = kCurveColumns;
-      c.packing = packing;
-      c.values = {{"phi_0", phi0},
-                  {"Z_0_no_rattlers", z0_no_rattlers},
-                  {"Z_0_mirror", z0_mirror},
-                  {"rattler_fraction_0", rattlers0},
-                  {"previous_phi", prev_phi},
-                  {"previous_pressure", prev_P}};
-      PetscCall(WriteLevelCheckpoint(comm, opts.output_dir + "/checkpoint.h5", opts.pressures, level, rows, step,
-                                     problem, &c));
-    }
+    const double E = params.young, d = problem.MeanDiameter();
+    const std::map<std::string, double> row = {
+        {"P_over_E", P_over_E}, {"phi", o.packing_fraction}, {"Z", o.coordination},
+        {"Z_no_rattlers", o.coordination_no_rattlers}, {"rattlers", double(o.rattlers)},
+        {"sigma_xx_over_E", o.stress[0] / E}, {"sigma_xy_over_E", o.stress[1] / E},
+        {"sigma_yy_over_E", o.stress[3] / E}, {"P_sigma_over_E", o.mean_stress / E}, {"K_over_E", K / E},
+        {"mean_volumetric_strain", o.mean_volumetric_strain}, {"contacts", double(o.contacts)},
+        {"sliding_contacts", double(o.sliding_contacts)}, {"newton_its", double(rep.newton_its)},
+        {"substeps", double(rep.substeps)}, {"cuts", double(rep.cuts)}, {"seconds", rep.seconds},
+        {"max_penetration", o.max_penetration}, {"pseudo_time_steps", double(rep.inner_solves)},
+        {"symbolic_factorizations", double(rep.layouts)}, {"unknowns", double(sizes.total)},
+        {"rigid_unknowns", double(sizes.rigid)}, {"deformable_unknowns", double(sizes.deformable)},
+        {"tangential_unknowns", double(sizes.tangential)}, {"candidates", double(sizes.normal)},
+        {"jacobian_nonzeros", double(sizes.jacobian_nonzeros)},
+        {"force_residual_over_Pd", rep.force_residual / (P * d)}, {"relaxed_substeps", double(rep.relaxed_substeps)},
+        {"gauge_torque_over_Pd2", problem.Summary().max_gauge_torque / (P * d * d)},
+        {"factorizations", double(rep.factorizations)}, {"body_force_over_Pd", balance.body_force / (P * d)},
+        {"body_torque_over_Pd2", balance.body_torque / (P * d * d)}};
+    Checkpoint c;
+    c.driver = "compact";
+    c.scene = scene;
+    c.packing = packing;
+    c.values = {{"phi_0", phi0},
+                {"Z_0_no_rattlers", z0_no_rattlers},
+                {"Z_0_mirror", z0_mirror},
+                {"rattler_fraction_0", rattlers0},
+                {"previous_phi", prev_phi},
+                {"previous_pressure", prev_P}};
+    PetscCall(outputs.Level(level, opts.pressures, row, step, problem, c));
     PetscCall(PetscLogStagePop());
   }
-  PetscCall(PetscPrintf(comm, "  wrote %s/curve.csv%s%s\n", opts.output_dir.c_str(),
-                        opts.write_hdf5 ? ", levels.h5" : "", opts.checkpoint ? ", checkpoint.h5" : ""));
+  PetscCall(PetscPrintf(comm, "  wrote %s: %s\n", opts.output_dir.c_str(), outputs.Written().c_str()));
   PetscFunctionReturn(0);
 }
 

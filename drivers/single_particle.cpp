@@ -6,7 +6,8 @@ static const char help[] =
     "packing fraction phi_p = particle area / box area is exact equilibrium of\n"
     "    min  sum_e W(F) + P * box_area   subject to   gap(node, wall) >= 0,\n"
     "solved by semismooth Newton on the KKT system (PETSc SNES, MUMPS LU).\n\n"
-    "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (deformed meshes) and\n"
+    "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (deformed meshes; levels.xdmf\n"
+    "beside it opens in ParaView) and\n"
     "<output_dir>/checkpoint.h5 (after every level: what -restart needs to continue the run).\n\n"
     "Examples:\n"
     "  build/bin/single-particle -mesh_triangles 92 -output_dir out/sp\n"
@@ -22,10 +23,12 @@ static const char help[] =
 #include <cmath>
 #include <exception>
 #include <string>
+#include <map>
 #include <vector>
 
 #include "deformix/checkpoint.hpp"
 #include "deformix/disk_mesh.hpp"
+#include "deformix/level_outputs.hpp"
 #include "deformix/load_controller.hpp"
 #include "deformix/options.hpp"
 #include "deformix/output.hpp"
@@ -135,19 +138,13 @@ PetscErrorCode Run(MPI_Comm comm) {
                           opts.pressures[restart.levels.size()]));
 
   // 3. Levels: solve, measure, write.
-  CsvWriter curve;
-  PetscCall(curve.Open(comm, opts.output_dir + "/curve.csv", kCurveColumns));
-  std::vector<std::vector<double>> rows = restart.rows;  // the curve so far (checkpoints repeat it)
-  for (const std::vector<double> &row : rows) PetscCall(curve.Row(row));
-  const std::string h5 = opts.output_dir + "/levels.h5";
-  // Results of an earlier run in this directory must not mix with this one;
-  // a restarted run keeps the levels before its checkpoint.
-  if (restarting) PetscCall(TruncateLevelsHDF5(comm, h5, static_cast<int>(rows.size())));
-  else PetscCall(RemoveFile(comm, h5));
+  LevelOutputs outputs;
+  PetscCall(outputs.Open(comm, {opts.output_dir, bool(opts.write_hdf5), bool(opts.checkpoint)}, kCurveColumns,
+                         restarting ? &restart : nullptr));
   PetscCall(PetscPrintf(comm, "  %10s %10s %10s %6s %6s %9s\n", "P/E", "phi_p", "area_ratio", "newton", "steps",
                         "seconds"));
   double step = restarting ? restart.load_step : -1.0;
-  for (size_t level = rows.size(); level < opts.pressures.size(); ++level) {
+  for (size_t level = outputs.LevelsDone(); level < opts.pressures.size(); ++level) {
     const double P_over_E = opts.pressures[level];
     LevelReport rep;
     PetscCall(PetscLogStagePush(stage_solve));
@@ -163,23 +160,19 @@ PetscErrorCode Run(MPI_Comm comm) {
     PetscCall(PetscPrintf(comm, "  %10.4g %10.6f %10.6f %6" PetscInt_FMT " %6d %9.3f\n", P_over_E,
                           s.packing_fraction, s.area_ratio, rep.newton_its, rep.substeps, rep.seconds));
     PetscCall(PetscLogStagePush(stage_output));
-    rows.push_back({P_over_E, s.packing_fraction, s.area_ratio, static_cast<double>(rep.newton_its), rep.seconds,
-                    static_cast<double>(rep.substeps), static_cast<double>(rep.cuts), s.box_width, s.box_height,
-                    wall_err, s.max_penetration, s.min_cell_area_ratio, static_cast<double>(s.active_contacts)});
-    PetscCall(curve.Row(rows.back()));
-    if (opts.write_hdf5) PetscCall(WriteLevelHDF5(comm, h5, static_cast<int>(level), P_over_E, problem));
-    if (opts.checkpoint) {
-      Checkpoint c;
-      c.driver = "single-particle";
-      c.scene = scene;
-      c.columns = kCurveColumns;
-      PetscCall(WriteLevelCheckpoint(comm, opts.output_dir + "/checkpoint.h5", opts.pressures, level, rows, step,
-                                     problem, &c));
-    }
+    const std::map<std::string, double> row = {
+        {"P_over_E", P_over_E}, {"phi", s.packing_fraction}, {"area_ratio", s.area_ratio},
+        {"newton_its", double(rep.newton_its)}, {"seconds", rep.seconds}, {"substeps", double(rep.substeps)},
+        {"cuts", double(rep.cuts)}, {"box_width", s.box_width}, {"box_height", s.box_height},
+        {"wall_force_error", wall_err}, {"max_penetration", s.max_penetration},
+        {"min_cell_area_ratio", s.min_cell_area_ratio}, {"active_contacts", double(s.active_contacts)}};
+    Checkpoint c;
+    c.driver = "single-particle";
+    c.scene = scene;
+    PetscCall(outputs.Level(level, opts.pressures, row, step, problem, c));
     PetscCall(PetscLogStagePop());
   }
-  PetscCall(PetscPrintf(comm, "  wrote %s/curve.csv%s%s\n", opts.output_dir.c_str(),
-                        opts.write_hdf5 ? ", levels.h5" : "", opts.checkpoint ? ", checkpoint.h5" : ""));
+  PetscCall(PetscPrintf(comm, "  wrote %s: %s\n", opts.output_dir.c_str(), outputs.Written().c_str()));
   PetscFunctionReturn(0);
 }
 
