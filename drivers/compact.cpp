@@ -25,7 +25,7 @@ static const char help[] =
     "Examples:\n"
     "  build/bin/compact -options_file petsc-options/default.opts     (20 disks, a few seconds)\n"
     "  build/bin/compact -n_particles 64 -kappa 0.5 -friction 0.2 -pressures 1e-4,1e-3 -output_dir out/c64\n"
-    "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8   (1500 disks: not yet practical)\n"
+    "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8   (1500 disks: hours per curve)\n"
     "  build/bin/compact -options_file petsc-options/default.opts -pressures 1e-4,1e-3,3e-3,0.01,0.02,0.03,0.05 \\\n"
     "      -restart out/compact/checkpoint.h5      (continue the default scene by one more level)\n\n"
     "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view; -settle_snes_*, -settle_ksp_*,\n"
