@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <initializer_list>
 #include <vector>
 
 namespace deformix {
@@ -51,6 +52,19 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
 
 namespace {
 
+// Work vectors of a strategy, duplicated from the layout's z (a new set with
+// every new candidate layout) and destroyed together.
+PetscErrorCode DuplicateAll(Vec z, std::initializer_list<Vec *> vecs) {
+  PetscFunctionBeginUser;
+  for (Vec *v : vecs) PetscCall(VecDuplicate(z, v));
+  PetscFunctionReturn(0);
+}
+PetscErrorCode DestroyAll(std::initializer_list<Vec *> vecs) {
+  PetscFunctionBeginUser;
+  for (Vec *v : vecs) PetscCall(VecDestroy(v));
+  PetscFunctionReturn(0);
+}
+
 constexpr double kMaxMove = 0.5;        // trust radius cap, in <d>
 constexpr int kMaxRejections = 12;      // rejected trial steps in a row before the load step fails
 constexpr int kBacktracks = 4;          // step fractions 1, 1/2, 1/4, 1/8 tried before a larger shift
@@ -83,17 +97,7 @@ class MeritNewton {
 
 PetscErrorCode MeritNewton::Destroy() {
   PetscFunctionBeginUser;
-  PetscCall(VecDestroy(&d_));
-  PetscCall(VecDestroy(&za_));
-  PetscCall(VecDestroy(&G_));
-  PetscCall(VecDestroy(&Gt_));
-  PetscCall(VecDestroy(&s_));
-  PetscCall(VecDestroy(&sqrt_weight_));
-  PetscCall(VecDestroy(&zt_));
-  PetscCall(VecDestroy(&Ft_));
-  PetscCall(VecDestroy(&floor_));
-  PetscCall(VecDestroy(&weight_));
-  PetscCall(VecDestroy(&work_));
+  PetscCall(DestroyAll({&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_}));
   PetscFunctionReturn(0);
 }
 
@@ -104,17 +108,7 @@ PetscErrorCode MeritNewton::Attach() {
   layouts_ = p_.LayoutsCreated();
   PetscCall(Destroy());
   PetscCall(PetscObjectGetComm((PetscObject)z_, &comm_));
-  PetscCall(VecDuplicate(z_, &d_));
-  PetscCall(VecDuplicate(z_, &za_));
-  PetscCall(VecDuplicate(z_, &G_));
-  PetscCall(VecDuplicate(z_, &Gt_));
-  PetscCall(VecDuplicate(z_, &s_));
-  PetscCall(VecDuplicate(z_, &sqrt_weight_));
-  PetscCall(VecDuplicate(z_, &zt_));
-  PetscCall(VecDuplicate(z_, &Ft_));
-  PetscCall(VecDuplicate(z_, &floor_));
-  PetscCall(VecDuplicate(z_, &weight_));
-  PetscCall(VecDuplicate(z_, &work_));
+  PetscCall(DuplicateAll(z_, {&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_}));
   PetscCall(p_.ShiftDiagonals(floor_, weight_));
   PetscCall(VecCopy(weight_, sqrt_weight_));
   PetscCall(VecSqrtAbs(sqrt_weight_));
@@ -431,10 +425,7 @@ class AnchoredContinuation {
 PetscErrorCode AnchoredContinuation::Destroy() {
   PetscFunctionBeginUser;
   PetscCall(SNESDestroy(&snes_));
-  PetscCall(VecDestroy(&sqrt_weight_));
-  PetscCall(VecDestroy(&work_));
-  PetscCall(VecDestroy(&step_));
-  PetscCall(VecDestroy(&floor_));
+  PetscCall(DestroyAll({&sqrt_weight_, &work_, &step_, &floor_}));
   PetscFunctionReturn(0);
 }
 
@@ -445,10 +436,7 @@ PetscErrorCode AnchoredContinuation::Attach() {
   layouts_ = p_.LayoutsCreated();
   PetscCall(Destroy());
   PetscCall(PetscObjectGetComm((PetscObject)z_, &comm_));
-  PetscCall(VecDuplicate(z_, &sqrt_weight_));
-  PetscCall(VecDuplicate(z_, &work_));
-  PetscCall(VecDuplicate(z_, &step_));
-  PetscCall(VecDuplicate(z_, &floor_));
+  PetscCall(DuplicateAll(z_, {&sqrt_weight_, &work_, &step_, &floor_}));
   PetscCall(p_.ShiftDiagonals(floor_, sqrt_weight_));
   PetscCall(VecSqrtAbs(sqrt_weight_));
   const ProblemParameters &pp = p_.Parameters();

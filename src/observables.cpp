@@ -9,6 +9,18 @@
 
 namespace deformix {
 
+namespace {
+// Particle centres (x, y per particle): rigid centres, deformable centroids.
+std::vector<double> ParticleCentres(const CompactionProblem &problem) {
+  std::vector<double> centre(2 * problem.NumParticles(), 0.0);
+  for (int b = 0; b < static_cast<int>(problem.Bodies().size()); ++b)
+    problem.BodyCentroid(b, &centre[2 * problem.Bodies()[b].particle]);
+  for (int r = 0; r < static_cast<int>(problem.RigidBodies().size()); ++r)
+    problem.RigidPosition(r, &centre[2 * problem.RigidBodies()[r].particle], nullptr);
+  return centre;
+}
+}  // namespace
+
 PackingObservables ComputeObservables(const CompactionProblem &problem) {
   PackingObservables o;
   const StateSummary s = problem.Summary();
@@ -16,12 +28,7 @@ PackingObservables ComputeObservables(const CompactionProblem &problem) {
   o.max_penetration = s.max_penetration;
   const int np = problem.NumParticles();
 
-  // Particle centres: rigid centres, deformable centroids.
-  std::vector<double> centre(2 * np, 0.0);
-  for (int b = 0; b < static_cast<int>(problem.Bodies().size()); ++b)
-    problem.BodyCentroid(b, &centre[2 * problem.Bodies()[b].particle]);
-  for (int r = 0; r < static_cast<int>(problem.RigidBodies().size()); ++r)
-    problem.RigidPosition(r, &centre[2 * problem.RigidBodies()[r].particle], nullptr);
+  const std::vector<double> centre = ParticleCentres(problem);
 
   std::set<std::pair<int, int>> pairs;
   std::vector<std::set<int>> neighbours(np);  // force-carrying partners; walls as -1..-4
@@ -85,12 +92,7 @@ PackingObservables ComputeObservables(const CompactionProblem &problem) {
 }
 
 ForceNetwork ComputeForceNetwork(const CompactionProblem &problem) {
-  const int np = problem.NumParticles();
-  std::vector<double> centre(2 * np, 0.0);
-  for (int b = 0; b < static_cast<int>(problem.Bodies().size()); ++b)
-    problem.BodyCentroid(b, &centre[2 * problem.Bodies()[b].particle]);
-  for (int r = 0; r < static_cast<int>(problem.RigidBodies().size()); ++r)
-    problem.RigidPosition(r, &centre[2 * problem.RigidBodies()[r].particle], nullptr);
+  const std::vector<double> centre = ParticleCentres(problem);
   const double *w = problem.Walls();
   const double carrying = 1e-5 * problem.Pressure() * problem.MeanDiameter();  // as for Z (ComputeObservables)
   // Sum of the forces on the slave per (slave, master) pair; walls are
