@@ -96,16 +96,11 @@ ForceNetwork ComputeForceNetwork(const CompactionProblem &problem) {
   const double *w = problem.Walls();
   const double carrying = 1e-5 * problem.Pressure() * problem.MeanDiameter();  // as for Z (ComputeObservables)
   // Sum of the forces on the slave per (slave, master) pair; walls are
-  // masters -1..-4 (left, right, bottom, top: the wall nearest the contact point).
+  // masters -1..-4 (left, right, bottom, top).
   std::map<std::pair<int, int>, std::array<double, 2>> sum;
   for (const ContactForce &f : problem.ContactForces()) {
     if (!(f.normal_multiplier > 0.0)) continue;
-    int master = f.master_particle;
-    if (master < 0) {
-      const double d[4] = {std::abs(f.point[0] - w[kLeft]), std::abs(w[kRight] - f.point[0]),
-                           std::abs(f.point[1] - w[kBottom]), std::abs(w[kTop] - f.point[1])};
-      master = -1 - static_cast<int>(std::min_element(d, d + 4) - d);
-    }
+    const int master = f.master_particle >= 0 ? f.master_particle : -1 - f.wall;
     std::array<double, 2> &s = sum[{f.slave_particle, master}];
     s[0] += f.force[0], s[1] += f.force[1];
   }
@@ -116,10 +111,10 @@ ForceNetwork ComputeForceNetwork(const CompactionProblem &problem) {
     double xm[2];
     if (master >= 0) {
       xm[0] = centre[2 * master], xm[1] = centre[2 * master + 1];
-    } else {
-      const int wall = -1 - master;
-      xm[0] = wall == kLeft ? w[kLeft] : wall == kRight ? w[kRight] : xs[0];
-      xm[1] = wall == kBottom ? w[kBottom] : wall == kTop ? w[kTop] : xs[1];
+    } else {  // the foot of the perpendicular on the wall
+      const Wall wall = static_cast<Wall>(-1 - master);
+      xm[0] = xs[0], xm[1] = xs[1];
+      xm[WallBox::axis(wall)] = w[wall];
     }
     double n[2] = {xs[0] - xm[0], xs[1] - xm[1]};
     const double len = std::hypot(n[0], n[1]);

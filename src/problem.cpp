@@ -513,10 +513,10 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
     }
     case ContactType::RigidWall: {
       const RigidBody &body = rigid_[c.body];
-      const bool horizontal = c.wall == kLeft || c.wall == kRight;
-      const double sign = (c.wall == kLeft || c.wall == kBottom) ? 1.0 : -1.0;
-      const PetscInt d = body.dof_offset + (horizontal ? 0 : 1);
-      const double x = body.center[horizontal ? 0 : 1] + z[d];
+      const int axis = WallBox::axis(c.wall);
+      const double sign = WallBox::inward_sign(c.wall);
+      const PetscInt d = body.dof_offset + axis;
+      const double x = body.center[axis] + z[d];
       lc->k.ndof = 2;
       lc->k.gap = sign * (x - w[c.wall]) - body.radius;
       lc->dofs[0] = d, lc->k.dgap[0] = sign;
@@ -1416,14 +1416,15 @@ std::vector<ContactForce> CompactionProblem::ContactForces() const {
       }
     } else {
       // Wall: the force on the body is lambda_n along the wall's inward normal.
-      const bool horizontal = cc.wall == kLeft || cc.wall == kRight;
-      const double sign = (cc.wall == kLeft || cc.wall == kBottom) ? 1.0 : -1.0;
-      f.force[horizontal ? 0 : 1] = sign * lambda_[c];
+      const int axis = WallBox::axis(cc.wall);
+      const double sign = WallBox::inward_sign(cc.wall);
+      f.wall = cc.wall;
+      f.force[axis] = sign * lambda_[c];
       if (cc.type == ContactType::PointWall) {
         BoundaryPointPosition(cc.body, cc.point, f.point);
       } else {
         RigidPosition(cc.body, f.point, nullptr);
-        f.point[horizontal ? 0 : 1] -= sign * rigid_[cc.body].radius;
+        f.point[axis] -= sign * rigid_[cc.body].radius;
       }
     }
     f.state = active_now_.size() == candidates_.size() ? static_cast<int>(active_now_[c]) : (lambda_[c] > 0.0 ? static_cast<int>(kClosed) : static_cast<int>(kOpen));

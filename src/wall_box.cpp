@@ -21,9 +21,8 @@ void WallBox::pressure_hessian(double P, double H[16]) {
 
 ContactKinematics WallBox::point_gap(Wall wall, const double p[2], const double w[4], int n, const int dof_x[],
                                      const int dof_y[], const double coeff[], int dof_wall) {
-  // Left and bottom walls: g = p - w; right and top: g = w - p.
-  const double sign = (wall == kLeft || wall == kBottom) ? 1.0 : -1.0;
-  const bool horizontal = wall == kLeft || wall == kRight;
+  const double sign = inward_sign(wall);
+  const bool horizontal = axis(wall) == 0;
   double g[4];
   point_gaps(p, w, g);
   ContactKinematics k;

@@ -171,6 +171,7 @@ struct ContactCandidate {
 struct ContactForce {
   ContactType type;
   int slave_particle = -1, master_particle = -1;  // master -1: a wall
+  int wall = -1;                                  // the wall (Wall) of a wall contact, -1 otherwise
   double force[2] = {0, 0};   // force on the slave (translational part)
   double point[2] = {0, 0};   // contact point
   double normal_multiplier = 0, tangential_multiplier = 0;

@@ -28,10 +28,16 @@ struct WallBox {
   static void pressure_gradient(double P, const double w[4], double g[4]);
   static void pressure_hessian(double P, double H[16]);
 
+  // The walls' one sign convention: wall k's inward normal is
+  // inward_sign(k) e_axis(k), so the gap of a point p against it is
+  // inward_sign(k) (p[axis(k)] - w[k]) (left and bottom: p - w; right and
+  // top: w - p), and a contact force lambda pushes the body along the normal.
+  static int axis(Wall k) { return k == kLeft || k == kRight ? 0 : 1; }
+  static double inward_sign(Wall k) { return k == kLeft || k == kBottom ? 1.0 : -1.0; }
+
   // Gaps of a point against the four walls, indexed by Wall.
   static void point_gaps(const double p[2], const double w[4], double g[4]) {
-    g[kLeft] = p[0] - w[kLeft], g[kRight] = w[kRight] - p[0];
-    g[kBottom] = p[1] - w[kBottom], g[kTop] = w[kTop] - p[1];
+    for (int k = 0; k < 4; ++k) g[k] = inward_sign(Wall(k)) * (p[axis(Wall(k))] - w[k]);
   }
 
   // Gap against `wall` of a point p = sum_k coeff[k] x_k that is a fixed
