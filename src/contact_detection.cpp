@@ -1,29 +1,9 @@
-// Contact detection: candidate pairs within a margin, refreshed between load
-// steps (and after a solve that moved a point past its candidate set).
-//
-// Distribution: each rank runs the narrow phase (the per-node distances, the
-// whole cost) only for the pairs whose slave particle it owns, i.e. its own
-// particles against their neighbours (ghosts) found by the broad phase; the
-// candidates are then gathered on every rank (a few integers each), so every
-// rank holds the same list, sorted by RefreshCandidates into an order that does
-// not depend on the number of ranks.
-//
-// Broad phase: a uniform grid of cells of the size of the largest particle
-// bounding circle plus the margin; each particle is binned by its centre and
-// only the 3 x 3 neighbouring cells are searched, so the cost is linear in
-// the number of particles.
-// Narrow phase, per pair type (the slave carries the multiplier):
-//   rigid - rigid            gap = |c_B - c_A| - r_A - r_B
-//   rigid - deformable       each boundary node of the deformable disk against the circle
-//   deformable - deformable  each boundary node of the higher-numbered disk against the
-//                            closest boundary segment of the other (single pass)
-//   any - wall               rigid disks by their radius, deformable disks by their
-//                            boundary points (nodes and Bezier control points)
+// Contact detection (contact_detection.hpp).
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
-#include "deformix/problem.hpp"
+#include "deformix/contact_detection.hpp"
 
 namespace deformix {
 
@@ -32,7 +12,7 @@ namespace {
 struct Bound {
   double x, y, r;
   bool rigid;
-  int index;  // into bodies_ or rigid_
+  int index;  // into scene.deformable or scene.rigid
 };
 
 // Closest boundary segment of a counter-clockwise boundary polygon to p, and
@@ -58,19 +38,20 @@ void ClosestSegment(const std::vector<double> &xb, const double p[2], int *segme
 
 }  // namespace
 
-std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin) const {
-  std::vector<ContactCandidate> own = DetectOwnCandidates(margin);
-  if (size_ == 1) return own;
+std::vector<ContactCandidate> GatherCandidates(MPI_Comm comm, const std::vector<ContactCandidate> &own) {
+  int size = 1;
+  MPI_Comm_size(comm, &size);
+  if (size == 1) return own;
   // Gather: 6 integers per candidate.
   std::vector<int> send;
   for (const ContactCandidate &c : own)
     send.insert(send.end(), {static_cast<int>(c.type), c.body, c.point, static_cast<int>(c.wall), c.master, c.segment});
   int count = static_cast<int>(send.size());
-  std::vector<int> counts(size_), displs(size_, 0);
-  MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
-  for (int r = 1; r < size_; ++r) displs[r] = displs[r - 1] + counts[r - 1];
-  std::vector<int> all(static_cast<size_t>(displs[size_ - 1] + counts[size_ - 1]));
-  MPI_Allgatherv(send.data(), count, MPI_INT, all.data(), counts.data(), displs.data(), MPI_INT, comm_);
+  std::vector<int> counts(size), displs(size, 0);
+  MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm);
+  for (int r = 1; r < size; ++r) displs[r] = displs[r - 1] + counts[r - 1];
+  std::vector<int> all(static_cast<size_t>(displs[size - 1] + counts[size - 1]));
+  MPI_Allgatherv(send.data(), count, MPI_INT, all.data(), counts.data(), displs.data(), MPI_INT, comm);
   std::vector<ContactCandidate> out(all.size() / 6);
   for (size_t i = 0; i < out.size(); ++i) {
     const int *v = &all[6 * i];
@@ -80,40 +61,35 @@ std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin)
   return out;
 }
 
-std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double margin) const {
+std::vector<ContactCandidate> DetectOwnCandidates(const DetectionScene &scene, double reach, int rank) {
   std::vector<ContactCandidate> out;
-  const double reach = margin * mean_diameter_;
+  const double *walls = scene.walls;
 
-  // Current boundary node positions and bounding circles of every particle.
-  std::vector<std::vector<double>> boundary(bodies_.size());
+  // Bounding circles of every particle: deformable disks around the mean of their boundary nodes.
   std::vector<Bound> bounds;
-  for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) {
-    const DiskMesh &m = bodies_[b].mesh;
-    boundary[b].resize(2 * m.boundary.size());
+  for (int b = 0; b < static_cast<int>(scene.deformable.size()); ++b) {
+    const std::vector<double> &xb = scene.deformable[b].boundary;
+    const size_t nb = xb.size() / 2;
     double c[2] = {0.0, 0.0};
-    for (size_t i = 0; i < m.boundary.size(); ++i) {
-      NodePosition(b, m.boundary[i], &boundary[b][2 * i]);
-      c[0] += boundary[b][2 * i] / m.boundary.size(), c[1] += boundary[b][2 * i + 1] / m.boundary.size();
-    }
+    for (size_t i = 0; i < nb; ++i) c[0] += xb[2 * i] / nb, c[1] += xb[2 * i + 1] / nb;
     double r = 0.0;
-    for (size_t i = 0; i < m.boundary.size(); ++i)
-      r = std::max(r, std::hypot(boundary[b][2 * i] - c[0], boundary[b][2 * i + 1] - c[1]));
+    for (size_t i = 0; i < nb; ++i) r = std::max(r, std::hypot(xb[2 * i] - c[0], xb[2 * i + 1] - c[1]));
     bounds.push_back({c[0], c[1], r, false, b});
   }
-  for (int r = 0; r < static_cast<int>(rigid_.size()); ++r) {
-    double c[2];
-    RigidPosition(r, c, nullptr);
-    bounds.push_back({c[0], c[1], rigid_[r].radius, true, r});
-  }
-  auto particle_of = [&](const Bound &b) { return b.rigid ? rigid_[b.index].particle : bodies_[b.index].particle; };
+  for (int r = 0; r < static_cast<int>(scene.rigid.size()); ++r)
+    bounds.push_back({scene.rigid[r].centre[0], scene.rigid[r].centre[1], scene.rigid[r].radius, true, r});
+  auto particle_of = [&](const Bound &b) {
+    return b.rigid ? scene.rigid[b.index].particle : scene.deformable[b.index].particle;
+  };
+  auto owner_of = [&](const Bound &b) { return b.rigid ? scene.rigid[b.index].owner : scene.deformable[b.index].owner; };
 
   // Walls.
   for (const Bound &bd : bounds) {
-    if (ParticleOwner(particle_of(bd)) != rank_) continue;
+    if (owner_of(bd) != rank) continue;
     if (bd.rigid) {
       double g[4];
       const double c[2] = {bd.x, bd.y};
-      WallBox::point_gaps(c, w_, g);
+      WallBox::point_gaps(c, walls, g);
       for (int k = 0; k < 4; ++k)
         if (g[k] - bd.r < reach) {
           ContactCandidate cc;
@@ -124,12 +100,11 @@ std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double marg
     }
     double g[4];
     const double c[2] = {bd.x, bd.y};
-    WallBox::point_gaps(c, w_, g);
+    WallBox::point_gaps(c, walls, g);
     if (*std::min_element(g, g + 4) - bd.r >= reach) continue;
-    for (int i = 0; i < static_cast<int>(bodies_[bd.index].mesh.boundary.size()); ++i) {
-      double x[2];
-      BoundaryPointPosition(bd.index, i, x);
-      WallBox::point_gaps(x, w_, g);
+    const std::vector<double> &points = scene.deformable[bd.index].points;
+    for (int i = 0; i < static_cast<int>(points.size() / 2); ++i) {
+      WallBox::point_gaps(&points[2 * i], walls, g);
       for (int k = 0; k < 4; ++k)
         if (g[k] < reach) {
           ContactCandidate cc;
@@ -163,7 +138,7 @@ std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double marg
 
   // Boundary nodes of the deformable slave S against the curve of the deformable master M.
   auto node_segment_candidates = [&](const Bound &M, const Bound &S) {
-    const std::vector<double> &xs = boundary[S.index], &xm = boundary[M.index];
+    const std::vector<double> &xs = scene.deformable[S.index].boundary, &xm = scene.deformable[M.index].boundary;
     for (int k = 0; k < static_cast<int>(xs.size() / 2); ++k) {
       const double *p = &xs[2 * k];
       if (std::hypot(p[0] - M.x, p[1] - M.y) - M.r >= reach) continue;
@@ -196,21 +171,20 @@ std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double marg
             // Deformable pair: B's nodes against A's curve, and with
             // -contact_deformable two_pass also A's nodes against B's curve. Each pass
             // belongs to the rank of its slave.
-            if (ParticleOwner(particle_of(B)) == rank_) node_segment_candidates(A, B);
-            const bool two_pass = params_.deformable_contact == DeformableContact::TwoPass;
-            if (two_pass && ParticleOwner(particle_of(A)) == rank_) node_segment_candidates(B, A);
+            if (owner_of(B) == rank) node_segment_candidates(A, B);
+            if (scene.two_pass && owner_of(A) == rank) node_segment_candidates(B, A);
             continue;
           }
           // The slave: the deformable disk of a rigid-deformable pair, else B.
           const Bound &slave = A.rigid != B.rigid ? (A.rigid ? B : A) : B;
-          if (ParticleOwner(particle_of(slave)) != rank_) continue;
+          if (owner_of(slave) != rank) continue;
           if (A.rigid && B.rigid) {
             ContactCandidate cc;
             cc.type = ContactType::RigidRigid, cc.master = A.index, cc.body = B.index;
             out.push_back(cc);
           } else {
             const Bound &R = A.rigid ? A : B, &D = A.rigid ? B : A;
-            const std::vector<double> &xb = boundary[D.index];
+            const std::vector<double> &xb = scene.deformable[D.index].boundary;
             for (int k = 0; k < static_cast<int>(xb.size() / 2); ++k)
               if (std::hypot(xb[2 * k] - R.x, xb[2 * k + 1] - R.y) - R.r < reach) {
                 ContactCandidate cc;

@@ -426,6 +426,39 @@ PetscErrorCode CompactionProblem::RestoreSnapshot(const Snapshot &s) {
 }
 
 // ---------------------------------------------------------------------------
+DetectionScene CompactionProblem::DetectionView() const {
+  DetectionScene scene;
+  for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) {
+    const DiskMesh &m = bodies_[b].mesh;
+    DetectionScene::Deformable d;
+    d.particle = bodies_[b].particle, d.owner = ParticleOwner(d.particle);
+    d.boundary.resize(2 * m.boundary.size());
+    d.points.resize(2 * m.boundary.size());
+    for (size_t i = 0; i < m.boundary.size(); ++i) {
+      NodePosition(b, m.boundary[i], &d.boundary[2 * i]);
+      BoundaryPointPosition(b, static_cast<int>(i), &d.points[2 * i]);
+    }
+    scene.deformable.push_back(std::move(d));
+  }
+  for (int r = 0; r < static_cast<int>(rigid_.size()); ++r) {
+    DetectionScene::Rigid rb;
+    rb.particle = rigid_[r].particle, rb.owner = ParticleOwner(rb.particle), rb.radius = rigid_[r].radius;
+    RigidPosition(r, rb.centre, nullptr);
+    scene.rigid.push_back(rb);
+  }
+  std::copy(w_, w_ + 4, scene.walls);
+  scene.two_pass = params_.deformable_contact == DeformableContact::TwoPass;
+  return scene;
+}
+
+std::vector<ContactCandidate> CompactionProblem::DetectOwnCandidates(double margin) const {
+  return deformix::DetectOwnCandidates(DetectionView(), margin * mean_diameter_, rank_);
+}
+
+std::vector<ContactCandidate> CompactionProblem::DetectCandidates(double margin) const {
+  return GatherCandidates(comm_, DetectOwnCandidates(margin));
+}
+
 PetscErrorCode CompactionProblem::RefreshCandidates() {
   PetscFunctionBeginUser;
   PetscCall(PetscLogEventBegin(event_detect, 0, 0, 0, 0));
@@ -459,116 +492,6 @@ PetscErrorCode CompactionProblem::RefreshCandidates() {
 }
 
 // ---------------------------------------------------------------------------
-// Kinematics of one candidate: gap, slip and derivatives on its global unknowns.
-void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc, bool hessians) const {
-  const double *z0 = u_start_.empty() ? z : u_start_.data();  // slip reference: the start of the step
-  double q[PairKinematics::kMaxDofs] = {}, q0[PairKinematics::kMaxDofs] = {};
-  int nq = 0;
-  auto add_node = [&](const DeformableBody &body, int node) {
-    for (int i = 0; i < 2; ++i) {
-      const PetscInt d = body.dof_offset + 2 * node + i;
-      lc->dofs[nq] = d;
-      q[nq] = body.center[i] + body.mesh.X[2 * node + i] + z[d];
-      q0[nq] = body.center[i] + body.mesh.X[2 * node + i] + z0[d];
-      ++nq;
-    }
-  };
-  auto add_rigid = [&](const RigidBody &body) {
-    for (int i = 0; i < 3; ++i) {
-      const bool present = i < 2 || Frictional();
-      const PetscInt d = body.dof_offset + i;
-      const double ref = i < 2 ? body.center[i] : 0.0;
-      lc->dofs[nq] = present ? d : -1;
-      q[nq] = present ? ref + z[d] : 0.0;
-      q0[nq] = present ? ref + z0[d] : 0.0;
-      ++nq;
-    }
-  };
-  const double *w = z + WallOffset();
-  const PetscInt wall_dof = WallOffset() + c.wall;
-  lc->frictional = HasTangential(c);
-  lc->curved = false;
-  lc->beyond = 0;
-  lc->slave_nodes = 1;
-  lc->k = PairKinematics();
-  for (PetscInt &d : lc->dofs) d = -1;
-  switch (c.type) {
-    case ContactType::PointWall: {
-      const DeformableBody &body = bodies_[c.body];
-      const BoundaryPoint bp = boundary_point(body.mesh, c.point);
-      double x[2] = {0.0, 0.0};
-      int dx[3], dy[3];
-      for (int a = 0; a < bp.n; ++a) {
-        const int n = bp.nodes[a];
-        dx[a] = static_cast<int>(body.dof_offset) + 2 * n, dy[a] = dx[a] + 1;
-        x[0] += bp.coeff[a] * (body.center[0] + body.mesh.X[2 * n] + z[dx[a]]);
-        x[1] += bp.coeff[a] * (body.center[1] + body.mesh.X[2 * n + 1] + z[dy[a]]);
-      }
-      const ContactKinematics k = WallBox::point_gap(c.wall, x, w, bp.n, dx, dy, bp.coeff, static_cast<int>(wall_dof));
-      lc->k.ndof = k.ndof;
-      lc->k.gap = k.gap;
-      for (int a = 0; a < k.ndof; ++a) lc->dofs[a] = k.dofs[a], lc->k.dgap[a] = k.dgap[a];
-      lc->slave_xy = -1;
-      return;
-    }
-    case ContactType::RigidWall: {
-      const RigidBody &body = rigid_[c.body];
-      const int axis = WallBox::axis(c.wall);
-      const double sign = WallBox::inward_sign(c.wall);
-      const PetscInt d = body.dof_offset + axis;
-      const double x = body.center[axis] + z[d];
-      lc->k.ndof = 2;
-      lc->k.gap = sign * (x - w[c.wall]) - body.radius;
-      lc->dofs[0] = d, lc->k.dgap[0] = sign;
-      lc->dofs[1] = wall_dof, lc->k.dgap[1] = -sign;
-      lc->slave_xy = -1;
-      return;
-    }
-    case ContactType::RigidRigid:
-      add_rigid(rigid_[c.master]);
-      add_rigid(rigid_[c.body]);
-      lc->k = rigid_rigid(q, q0, rigid_[c.master].radius, rigid_[c.body].radius);
-      lc->slave_xy = 3;
-      break;
-    case ContactType::RigidNode:
-      add_rigid(rigid_[c.master]);
-      add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
-      lc->k = rigid_node(q, q0, rigid_[c.master].radius);
-      lc->slave_xy = 3;
-      break;
-    case ContactType::NodeSegment: {
-      const DiskMesh &m = bodies_[c.master].mesh;
-      const int nb = static_cast<int>(m.boundary.size());
-      // The master boundary around its node `segment`: five nodes, the smooth
-      // master curve on the two segments around it.
-      if (params_.deformable_contact == DeformableContact::Mortar) {
-        // Mortar: seven master nodes around `segment`, the slave nodes point-2 .. point+2.
-        const DiskMesh &s = bodies_[c.body].mesh;
-        const int ns = static_cast<int>(s.boundary.size());
-        for (int j = -3; j <= 3; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
-        for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
-        MortarSupport support;
-        support.order = s.order;
-        support.vertex = s.order == 1 || c.point % 2 == 0;
-        for (int side = 0; side < 2; ++side) {
-          const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
-          support.length[side] = std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
-        }
-        lc->k = mortar_node(q, q0, support, hessians, &lc->beyond);
-        lc->slave_xy = 14, lc->slave_nodes = 5;
-        break;
-      }
-      for (int j = -2; j <= 2; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
-      add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
-      lc->k = curve_node(q, q0, hessians, &lc->beyond);
-      lc->slave_xy = 10;
-      break;
-    }
-  }
-  lc->curved = true;
-}
-
-// ---------------------------------------------------------------------------
 // One walk over elements, walls and contacts serves the residual, the
 // Jacobian's sparsity pattern and its values, so the three can never
 // disagree: every entry is emitted whatever the state (zeros included).
@@ -578,7 +501,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   const bool pattern = ci != nullptr;
   const bool values = cv != nullptr;
   const bool need_K = pattern || values;
-  const PetscInt wall_off = WallOffset(), rot_off = GaugeOffset(), lam_off = MultiplierOffset();
+  const PetscInt wall_off = WallOffset(), rot_off = GaugeOffset();
   // Entries in natural numbering; the pattern is stored in PETSc numbering.
   auto entry = [&](PetscInt i, PetscInt j, double v) {
     if (i < 0 || j < 0) return;
@@ -691,62 +614,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
     if (need_K) entry(mu_dof, mu_dof, gauge_on ? 0.0 : row_scale);
   }
 
-  // Contacts: -lambda_n dg - lambda_t ds in the equilibrium rows, the NCP
-  // functions in the multiplier rows.
-  const double c_n = params_.ncp_scale * params_.young, c_t = c_n, mu_f = friction_on_ ? params_.friction : 0.0;
-  // Dual proximal term: -delta on the multiplier diagonal of the Newton matrix.
-  // Redundant constraints (hyperstatic rigid contacts, a square lattice) leave
-  // the multipliers indeterminate and the KKT matrix singular; the term keeps
-  // the indeterminate part at its current value and, like rho, never enters
-  // the residual.
-  const double dual_reg = params_.prox_eta;
-  LocalContact lc;
-  for (size_t c = 0; c < candidates_.size(); ++c) {
-    if (CandidateOwner(candidates_[c]) != rank_) continue;
-    const PetscInt ln_dof = lam_off + static_cast<PetscInt>(c), lt_dof = tangential_index_[c];
-    const double lam_n = z[ln_dof], lam_t = lt_dof >= 0 ? z[lt_dof] : 0.0;
-    // Second derivatives enter the matrix only through the multipliers.
-    ContactGeometry(candidates_[c], z, &lc, values && (lam_n != 0.0 || lam_t != 0.0));
-    const PairKinematics &k = lc.k;
-    const int nd = k.ndof;
-    const NormalNcp ncp = normal_ncp(ncp_now_, lam_n, k.gap, c_n);
-    TangentialNcp tan;
-    if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t);
-    if (active) {
-      (*active)[c] = lt_dof >= 0 ? tan.state : (ncp.active ? kClosed : kOpen);
-      switch_margin_[2 * c] = ncp.switch_margin;
-      switch_margin_[2 * c + 1] = lt_dof >= 0 ? tan.switch_margin : 0.0;
-      double slope = 0.0;
-      for (int a = 0; a < nd; ++a)
-        if (lc.dofs[a] >= 0) slope += std::abs(k.dgap[a]);
-      gap_bound_[2 * c] = k.gap;
-      gap_bound_[2 * c + 1] = slope;
-    }
-    if (F) {
-      for (int a = 0; a < nd; ++a)
-        if (lc.dofs[a] >= 0) F[lc.dofs[a]] -= lam_n * k.dgap[a] + lam_t * k.dslip[a];
-      F[ln_dof] += ncp.value;
-      if (lt_dof >= 0) F[lt_dof] += tan.value;
-    }
-    if (!need_K) continue;
-    if (lc.curved)
-      for (int a = 0; a < nd; ++a)
-        for (int b = 0; b < nd; ++b)
-          entry(lc.dofs[a], lc.dofs[b], -(lam_n * k.d2gap[a * nd + b] + lam_t * k.d2slip[a * nd + b]));
-    for (int a = 0; a < nd; ++a) {
-      entry(lc.dofs[a], ln_dof, -k.dgap[a]);
-      entry(ln_dof, lc.dofs[a], ncp.d_gap * k.dgap[a]);
-    }
-    entry(ln_dof, ln_dof, ncp.d_lambda - dual_reg);
-    if (lt_dof >= 0) {
-      for (int a = 0; a < nd; ++a) {
-        entry(lc.dofs[a], lt_dof, -k.dslip[a]);
-        entry(lt_dof, lc.dofs[a], tan.d_gap * k.dgap[a] + tan.d_slip * k.dslip[a]);
-      }
-      entry(lt_dof, lt_dof, tan.d_lambda_t - dual_reg);
-      entry(lt_dof, ln_dof, tan.d_lambda_n);
-    }
-  }
+  PetscCall(AssembleContacts(z, F, ci, cj, cv, active));
   PetscFunctionReturn(0);
 }
 
@@ -1382,53 +1250,6 @@ std::vector<double> CompactionProblem::CellAreaRatio(int b) const {
     }
     const ElementResult r = triangle_element(material_, m.order, Xe.data(), xe.data(), nullptr, nullptr);
     out[e] = r.inverted ? -1.0 : r.area / body.ref_cell_area[e];
-  }
-  return out;
-}
-
-std::vector<ContactForce> CompactionProblem::ContactForces() const {
-  std::vector<ContactForce> out;
-  std::vector<double> z(MultiplierOffset() + candidates_.size(), 0.0);
-  std::copy(u_.begin(), u_.end(), z.begin());
-  std::copy(w_, w_ + 4, z.begin() + WallOffset());
-  LocalContact lc;
-  for (size_t c = 0; c < candidates_.size(); ++c) {
-    const ContactCandidate &cc = candidates_[c];
-    ContactGeometry(cc, z.data(), &lc);
-    ContactForce f;
-    f.type = cc.type;
-    f.gap = lc.k.gap;
-    f.normal_multiplier = lambda_[c];
-    f.tangential_multiplier = lambda_t_[c];
-    f.slave_particle = SlaveParticle(cc);
-    f.master_particle = MasterParticle(cc);
-    if (lc.slave_xy >= 0) {
-      // Generalized force on the slave's translation: lambda_n dg/dx + lambda_t ds/dx.
-      for (int a = 0; a < lc.slave_nodes; ++a)
-        for (int i = 0; i < 2; ++i)
-          f.force[i] += lambda_[c] * lc.k.dgap[lc.slave_xy + 2 * a + i] + lambda_t_[c] * lc.k.dslip[lc.slave_xy + 2 * a + i];
-      if (cc.type == ContactType::RigidRigid) {
-        double xa[2];
-        RigidPosition(cc.master, xa, nullptr);
-        for (int i = 0; i < 2; ++i) f.point[i] = xa[i] + rigid_[cc.master].radius * lc.k.normal[i];
-      } else {
-        NodePosition(cc.body, bodies_[cc.body].mesh.boundary[cc.point], f.point);
-      }
-    } else {
-      // Wall: the force on the body is lambda_n along the wall's inward normal.
-      const int axis = WallBox::axis(cc.wall);
-      const double sign = WallBox::inward_sign(cc.wall);
-      f.wall = cc.wall;
-      f.force[axis] = sign * lambda_[c];
-      if (cc.type == ContactType::PointWall) {
-        BoundaryPointPosition(cc.body, cc.point, f.point);
-      } else {
-        RigidPosition(cc.body, f.point, nullptr);
-        f.point[axis] -= sign * rigid_[cc.body].radius;
-      }
-    }
-    f.state = active_now_.size() == candidates_.size() ? static_cast<int>(active_now_[c]) : (lambda_[c] > 0.0 ? static_cast<int>(kClosed) : static_cast<int>(kOpen));
-    out.push_back(f);
   }
   return out;
 }

@@ -77,6 +77,7 @@
 #include <string>
 #include <vector>
 
+#include "deformix/contact_detection.hpp"
 #include "deformix/contact_law.hpp"
 #include "deformix/disk_mesh.hpp"
 #include "deformix/hyperelastic_element.hpp"
@@ -149,23 +150,6 @@ struct BoundaryPoint {
   double coeff[3] = {1.0, 0.0, 0.0};
 };
 BoundaryPoint boundary_point(const DiskMesh &mesh, int boundary_index);
-
-enum class ContactType : int {
-  PointWall = 0,    // deformable boundary point (BoundaryPoint) - wall
-  RigidWall = 1,    // rigid disk - wall
-  RigidRigid = 2,   // rigid `master` - rigid `body`
-  RigidNode = 3,    // rigid `master` - boundary node `point` of deformable `body`
-  NodeSegment = 4,  // boundary segment `segment` of deformable `master` - node `point` of deformable `body`
-};
-
-struct ContactCandidate {
-  ContactType type = ContactType::PointWall;
-  int body = 0;      // the slave body: deformable (PointWall, RigidNode, NodeSegment) or rigid
-  int point = 0;     // index into the slave's mesh.boundary (deformable slaves)
-  Wall wall = kLeft; // wall pairs
-  int master = -1;   // rigid body (RigidRigid, RigidNode) or deformable body (NodeSegment)
-  int segment = -1;  // NodeSegment: master boundary nodes boundary[segment] -> boundary[segment + 1]
-};
 
 // Force of one contact at the current state, for observables.
 struct ContactForce {
@@ -418,6 +402,7 @@ class CompactionProblem {
     int beyond = 0;        // node-segment: the closest point left the pair's window (window_node)
   };
   void ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc, bool hessians = false) const;
+  DetectionScene DetectionView() const;  // what contact detection reads, at the current state
   PetscErrorCode SetUpLayout();      // sizes, Vec/Mat/KSP for the current candidate set
   PetscErrorCode FormResidual(Vec z, Vec F);
   PetscErrorCode FormJacobian(Vec z, Mat J);
@@ -425,6 +410,9 @@ class CompactionProblem {
   PetscErrorCode Gather(Vec z, bool full);  // z -> zall_ (natural order): everything, or own + ghost unknowns
   PetscErrorCode Assemble(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
                           std::vector<PetscScalar> *cv, bool *inverted, std::vector<char> *active);
+  // The contacts' part of Assemble (contact_pairs.cpp).
+  PetscErrorCode AssembleContacts(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
+                                  std::vector<PetscScalar> *cv, std::vector<char> *active);
   double Areas(StateSummary *s) const;  // see Summary
   void Unpack(const double *z);
   void Pack(double *z) const;
