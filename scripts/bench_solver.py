@@ -8,7 +8,9 @@ phi, P_sigma/P, the largest net force on a body and the largest nodal force
 same options except -level_solver (and -load_step_policy), so the rows
 compare the strategies on the same packing and load path. A strategy is
 SOLVER (compact's default sub-stepping) or SOLVER/POLICY, e.g.
-anchored/adaptive = -level_solver anchored -load_step_policy adaptive.
+anchored/adaptive = -level_solver anchored -load_step_policy adaptive,
+optionally followed by ':' and more compact options, e.g.
+'anchored:-level_body_criterion true'.
 
 Scenes (--scenes):
   default     petsc-options/default.opts (20 disks, kappa 0.5, friction 0.2)
@@ -71,13 +73,14 @@ def scene_runs(a):
 
 
 def run_one(a, scene, label, ranks, opts, strategy):
-    out = os.path.join(a.runs, f"{label}_{strategy.replace('/', '_')}")
+    out = os.path.join(a.runs, f"{label}_" + "".join(c if c.isalnum() or c in "._" else "_" for c in strategy))
     os.makedirs(out, exist_ok=True)
     if strategy == "baseline":
         exe, solver = a.baseline, []
-    else:  # SOLVER or SOLVER/POLICY: -level_solver SOLVER [-load_step_policy POLICY]
-        name, _, policy = strategy.partition("/")
-        exe, solver = a.exe, ["-level_solver", name] + (["-load_step_policy", policy] if policy else [])
+    else:  # SOLVER[/POLICY][:OPTIONS]: -level_solver SOLVER [-load_step_policy POLICY] [OPTIONS]
+        spec, _, options = strategy.partition(":")
+        name, _, policy = spec.partition("/")
+        exe, solver = a.exe, ["-level_solver", name] + (["-load_step_policy", policy] if policy else []) + options.split()
     cmd = ([a.mpiexec, "--allow-run-as-root", "-n", str(ranks)] if ranks > 1 else []) + \
           [exe] + opts + solver + ["-output_dir", out, "-checkpoint", "false"] + a.extra.split()
     t0 = time.time()

@@ -30,6 +30,10 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "radius, shift, step fraction and length, accepted or rejected, closed and sliding contacts, "
                              "residual by block) and the level criterion's balances",
                              "", monitor, &monitor, nullptr));
+  PetscCall(PetscOptionsBool("-level_body_criterion",
+                             "anchored: the paper's level criterion also per body (net force and torque of every body "
+                             "below -level_force_rtol P <d> and P <d>^2), not only per node",
+                             "", body_criterion, &body_criterion, nullptr));
   PetscCall(PetscOptionsBool("-ptc_monitor",
                              "anchored: one line per pseudo-time step (residual by block, largest unbalanced force "
                              "and where it acts, phi, move)",
@@ -787,10 +791,19 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report)
     // contact forces (P <d>), the packing fraction no longer changing, and
     // the contact conditions (Signorini, Coulomb) still satisfied exactly.
     const double ncp_norm = std::hypot(part[3], part[4]);
-    if (settled && pp.level_force_rtol > 0.0 && force_residual <= pp.level_force_rtol * pressure * dmean &&
-        ncp_norm <= atol && std::abs(phi - phi_last) <= pp.level_phi_rtol * phi) {
-      report->relaxed = true;
-      break;
+    const double f_tol = pp.level_force_rtol * pressure * dmean;
+    if (settled && pp.level_force_rtol > 0.0 && force_residual <= f_tol && ncp_norm <= atol &&
+        std::abs(phi - phi_last) <= pp.level_phi_rtol * phi) {
+      bool balanced = true;
+      if (prm_.body_criterion) {  // and the net force and torque of every body
+        CompactionProblem::Balance b;
+        PetscCall(p_.BodyBalance(F_, &b));
+        balanced = b.body_force <= f_tol && b.body_torque <= f_tol * dmean;
+      }
+      if (balanced) {
+        report->relaxed = true;
+        break;
+      }
     }
     phi_last = phi;
     if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step

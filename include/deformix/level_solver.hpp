@@ -76,6 +76,7 @@ struct LevelSolverParameters {
   double initial_move = 0.1;  // trust radius m at the start of a load step, in <d>
   PetscBool monitor = PETSC_FALSE;  // -level_monitor: one line per Newton iteration
   SNESLineSearchType line_search = SNESLINESEARCHBT;  // anchored: the SNES line search (-snes_linesearch_type overrides)
+  PetscBool body_criterion = PETSC_FALSE;  // anchored: the level criterion per body too (-level_body_criterion)
   PetscBool ptc_monitor = PETSC_FALSE;              // anchored: -ptc_monitor, one line per pseudo-time step
   PetscBool newton_monitor = PETSC_FALSE;           // anchored: -newton_monitor, one line per Newton iteration
   PetscBool newton_monitor_contacts = PETSC_FALSE;  // anchored: -newton_monitor_contacts
