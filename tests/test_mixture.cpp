@@ -276,7 +276,7 @@ TEST(CoulombLaw, SwitchMarginsOfChangedStates) {
 // in a random 20-disk mixture (kappa 0.5, friction 0.2), two levels, with
 // the deformable pairs' contact law `law`.
 void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
-                                  LevelStrategy strategy = LevelStrategy::Anchored) {
+                                  LevelStrategy strategy = LevelStrategy::Anchored, bool body_criterion = false) {
   DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
   assign_deformable(packing, 0.5, 1);
   ProblemParameters p;
@@ -295,6 +295,8 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
   ASSERT_GT(n_rigid, 0);
   LoadControlParameters load;
   load.level.strategy = strategy;
+  load.level.body_criterion = body_criterion ? PETSC_TRUE : PETSC_FALSE;
+  const bool per_body = strategy == LevelStrategy::Newton || body_criterion;
   double step = -1.0;
   int level = 0;
   for (double P : {1e-4, 1e-3}) {
@@ -302,8 +304,8 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
     LevelReport rep;
     ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
     EXPECT_LE(rep.force_residual, 1e-4 * P * problem.MeanDiameter());
-    if (strategy == LevelStrategy::Newton) {
-      // The newton strategy's level criterion is per body: net force and torque.
+    if (per_body) {
+      // A level criterion per body (newton's, or anchored's with body_criterion): net force and torque.
       CompactionProblem::Balance b;
       ASSERT_PETSC(problem.StateBalance(&b));
       const double d = problem.MeanDiameter();
@@ -354,6 +356,11 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionMortar) {
 // step), whose level criterion is per body.
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionNewton) {
   CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Newton);
+}
+
+// The same with anchored and its level criterion also per body (-level_body_criterion).
+TEST(Mixture, RandomTwentyDiskMixtureWithFrictionBodyCriterion) {
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Anchored, true);
 }
 
 // A level that crosses a rearrangement: a rigid disk (radius 0.19) sits
