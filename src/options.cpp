@@ -108,6 +108,14 @@ PetscErrorCode PrepareOutputDirectory(MPI_Comm comm, const std::string &dir) {
   PetscFunctionReturn(0);
 }
 
+namespace {
+// True until CheckUnknownOptions has run: PETSc's own option parsing reports
+// a bad value with PETSC_ERR_USER (an unknown list entry) or
+// PETSC_ERR_ARG_UNKNOWN_TYPE (an unknown type name); later the same codes
+// mean a programming error and keep their traceback.
+bool reading_options = true;
+}  // namespace
+
 PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   // Prefixes of options read after start-up: by the SNES / KSP / PC / Mat of
   // each solve (settle_*: compact's rigid pre-settling), the Jacobian (jac_),
@@ -133,6 +141,7 @@ PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsLeftRestore(nullptr, &n, &names, &values));
   PetscCheck(unknown.empty(), comm, PETSC_ERR_USER_INPUT,
              "unknown option(s) %s: check the spelling against -help", unknown.c_str());
+  reading_options = false;
   PetscFunctionReturn(0);
 }
 
@@ -170,7 +179,8 @@ const char *program_name = "deformix";
 PetscErrorCode InputErrorHandler(MPI_Comm comm, int line, const char *fun, const char *file, PetscErrorCode n,
                                  PetscErrorType p, const char *mess, void *ctx) {
   const bool input = n == PETSC_ERR_USER_INPUT || n == PETSC_ERR_FILE_OPEN || n == PETSC_ERR_FILE_READ ||
-                     n == PETSC_ERR_FILE_UNEXPECTED || n == PETSC_ERR_ARG_WRONG || n == PETSC_ERR_ARG_OUTOFRANGE;
+                     n == PETSC_ERR_FILE_UNEXPECTED ||
+                     (reading_options && (n == PETSC_ERR_USER || n == PETSC_ERR_ARG_UNKNOWN_TYPE));
   if (!input) return PetscTraceBackErrorHandler(comm, line, fun, file, n, p, mess, ctx);
   if (p == PETSC_ERROR_INITIAL) {
     PetscMPIInt rank = 0;

@@ -36,9 +36,10 @@ PetscErrorCode CheckSceneMemory(MPI_Comm comm, double deformable_disks, double t
 
 // The common main() of the drivers: PetscInitialize, run, PetscFinalize; any
 // error becomes exit code 1. Errors in the user's input (options, files:
-// PETSC_ERR_USER_INPUT, _FILE_OPEN, _FILE_READ, _FILE_UNEXPECTED, _ARG_WRONG,
-// _ARG_OUTOFRANGE) print one line, "<program>: error: <message>"; others
-// PETSc's traceback.
+// PETSC_ERR_USER_INPUT, _FILE_OPEN, _FILE_READ, _FILE_UNEXPECTED, and while
+// the options are read, PETSc's own _USER and _ARG_UNKNOWN_TYPE for a bad
+// list entry or type name) print one line, "<program>: error: <message>";
+// others PETSc's traceback.
 int RunDriver(int argc, char **argv, const char *help, PetscErrorCode (*run)(MPI_Comm));
 
 // True when -help was given: drivers print their options and stop before running.
