@@ -576,7 +576,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   // Proximal terms on body and wall unknowns, weighted by D (r^2 on rigid
   // rotations, which are angles): rho D on the Newton matrix only, and
   // rho_a D (z - z_a) on both the residual and the matrix (pseudo-transient
-  // continuation towards equilibrium, see Solve).
+  // continuation towards equilibrium: SetAnchor, level_solver.hpp).
   if (need_K || (F && rho_anchor_ > 0.0)) {
     const std::vector<double> &weight = prox_weight_;
     const double rho = params_.prox_eta * params_.young;
