@@ -15,6 +15,7 @@ optionally followed by ':' and more compact options, e.g.
 Scenes (--scenes):
   default     petsc-options/default.opts (20 disks, kappa 0.5, friction 0.2)
   campaign50  the eight 50-disk runs kappa {0.2, 0.5, 0.8, 1} x friction {0, 0.2}
+  frictionless  the default scene with friction 0 and the four frictionless 50-disk runs
   large400    400 disks, kappa 0.5 friction 0.2 and kappa 1 friction 0
   paper1500   petsc-options/paper.opts (1500 disks) on --ranks ranks
 --pressures replaces the pressure list of campaign50, large400 and paper1500.
@@ -60,6 +61,14 @@ def scene_runs(a):
                 for k in (0.2, 0.5, 0.8, 1.0):
                     runs.append((s, f"n50_k{k:g}_mu{mu:g}", 1, ["-n_particles", "50", "-kappa", str(k), "-friction", str(mu),
                                                                "-pressures", p or CAMPAIGN_PRESSURES]))
+        elif s == "frictionless":
+            # The frictionless scenes, where -level_solver interior applies: the default scene
+            # without friction and the four frictionless 50-disk campaign runs.
+            runs.append((s, "n20_k0.5_mu0", 1, ["-options_file", os.path.join(ROOT, "petsc-options", "default.opts"),
+                                                "-friction", "0"]))
+            for k in (0.2, 0.5, 0.8, 1.0):
+                runs.append((s, f"n50_k{k:g}_mu0", 1, ["-n_particles", "50", "-kappa", str(k), "-friction", "0",
+                                                       "-pressures", p or CAMPAIGN_PRESSURES]))
         elif s == "large400":
             for k, mu in ((0.5, 0.2), (1.0, 0.0)):
                 runs.append((s, f"n400_k{k:g}_mu{mu:g}", 1, ["-n_particles", "400", "-kappa", str(k), "-friction", str(mu),
@@ -68,7 +77,7 @@ def scene_runs(a):
             opts = ["-options_file", os.path.join(ROOT, "petsc-options", "paper.opts"), "-kappa", "0.5", "-friction", "0.2"]
             runs.append((s, "n1500_k0.5_mu0.2", a.ranks, opts + (["-pressures", p] if p else [])))
         else:
-            sys.exit(f"unknown scene {s}: use default, campaign50, large400 or paper1500")
+            sys.exit(f"unknown scene {s}: use default, campaign50, frictionless, large400 or paper1500")
     return runs
 
 

@@ -1,5 +1,7 @@
 #include "deformix/level_solver.hpp"
 
+#include "deformix/interior_point.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -10,15 +12,16 @@ namespace deformix {
 
 PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
   PetscInt choice = static_cast<PetscInt>(strategy);
-  const char *const names[] = {"newton", "anchored"};  // LevelStrategy order
+  const char *const names[] = {"newton", "anchored", "interior"};  // LevelStrategy order
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Level solver", "deformix");
   PetscCall(PetscOptionsEList("-level_solver",
                               "equilibrium of a load step: newton (pseudo-transient continuation with one semismooth "
                               "Newton step per pseudo-time step, each step accepted by the residual of its proximal "
                               "subproblem) or anchored (pseudo-transient continuation, each pseudo-time step solved to "
-                              "convergence: -ptc_*)",
-                              "", names, 2, names[choice], &choice, nullptr));
+                              "convergence: -ptc_*) or interior (frictionless levels only: primal-dual interior point "
+                              "on the enthalpy with a barrier on the gaps, then an exact active-set polish)",
+                              "", names, 3, names[choice], &choice, nullptr));
   PetscCall(PetscOptionsInt("-level_max_its", "newton: linearizations per load step before the step is cut", "", max_its,
                             &max_its, nullptr));
   PetscCall(PetscOptionsReal("-level_initial_move",
@@ -827,6 +830,10 @@ PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameter
     AnchoredContinuation solver(problem, params);
     PetscCall(solver.Solve(pressure, report));
     report->factorizations = static_cast<int>(report->newton_its);  // one LU per Newton iteration
+    PetscFunctionReturn(0);
+  }
+  if (params.strategy == LevelStrategy::Interior) {
+    PetscCall(SolveLevelInterior(problem, params, pressure, report));
     PetscFunctionReturn(0);
   }
   MeritNewton solver(problem, params);

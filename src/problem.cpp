@@ -510,10 +510,12 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   };
   PetscFunctionBeginUser;
   if (inverted) *inverted = false;
+  if (F) merit_local_ = 0.0;
   if (active) {
     active->assign(candidates_.size(), kOpen);
     switch_margin_.assign(2 * candidates_.size(), 0.0);
     gap_bound_.assign(2 * candidates_.size(), 0.0);
+    barrier_row_.assign(2 * candidates_.size(), 0.0);
   }
   // Each rank assembles what it owns: the elements of its deformable disks,
   // the walls' load (rank 0), the proximal terms of its unknowns, the gauges
@@ -546,8 +548,10 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
       }
       const ElementResult r =
           triangle_element(material_, m.order, Xe.data(), xe.data(), F ? fe.data() : nullptr, need_K ? Ke.data() : nullptr);
+      if (F) merit_local_ += r.energy;
       if (r.inverted) {
         if (inverted) *inverted = true;
+        merit_local_ = INFINITY;
         std::fill(fe.begin(), fe.end(), 0.0);
         std::fill(Ke.begin(), Ke.end(), 0.0);
       }
@@ -565,6 +569,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
     double g[4];
     WallBox::pressure_gradient(pressure_, w, g);
     for (int i = 0; i < 4; ++i) F[wall_off + i] += g[i];
+    merit_local_ += pressure_ * WallBox::area(w);
   }
   if (need_K && rank_ == 0) {
     double H[16];
@@ -651,6 +656,7 @@ PetscErrorCode CompactionProblem::FormResidual(Vec z, Vec F) {
                                MPI_MAX, comm_));
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &inverted, 1, MPI_C_BOOL, MPI_LOR, comm_));
   inverted_ = inverted;
+  PetscCallMPI(MPI_Allreduce(&merit_local_, &merit_, 1, MPI_DOUBLE, MPI_SUM, comm_));
   PetscCall(PetscLogEventEnd(event_residual, 0, 0, 0, 0));
   PetscFunctionReturn(0);
 }
@@ -985,6 +991,32 @@ PetscErrorCode CompactionProblem::ShiftDiagonals(Vec floor, Vec weight) const {
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode CompactionProblem::BarrierRows(Vec gap, Vec stiffness, Vec target, Vec rows) const {
+  const std::initializer_list<Vec> out = {gap, stiffness, target, rows};
+  std::vector<PetscScalar *> a;
+  PetscFunctionBeginUser;
+  for (Vec v : out) {
+    PetscScalar *p;
+    PetscCall(VecSet(v, 0.0));
+    PetscCall(VecGetArray(v, &p));
+    a.push_back(p);
+  }
+  const bool have = gap_bound_.size() == 2 * candidates_.size() && barrier_row_.size() == 2 * candidates_.size();
+  for (size_t c = 0; c < candidates_.size(); ++c) {
+    if (CandidateOwner(candidates_[c]) != rank_) continue;  // its row is another rank's
+    const PetscInt row = petsc_of_[MultiplierOffset() + static_cast<PetscInt>(c)] - own_lo_;
+    if (have) {
+      a[0][row] = gap_bound_[2 * c] + barrier_eps_;
+      a[1][row] = barrier_row_[2 * c];
+      a[2][row] = barrier_row_[2 * c + 1];
+    }
+    a[3][row] = 1.0;
+  }
+  size_t i = 0;
+  for (Vec v : out) PetscCall(VecRestoreArray(v, &a[i++]));
+  PetscFunctionReturn(0);
+}
+
 PetscErrorCode CompactionProblem::AdoptState(Vec z) {
   const PetscScalar *za;
   PetscFunctionBeginUser;
@@ -1176,6 +1208,7 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
   PetscFunctionBeginUser;
   layouts_at_step_ = layouts_created_;
   ncp_now_ = params_.ncp;
+  barrier_mu_ = barrier_eps_ = 0.0;
   step_saved_ = SaveState();
   step_saved_pressure_ = pressure_;
   const State &saved = step_saved_;
@@ -1218,6 +1251,7 @@ PetscErrorCode CompactionProblem::EndLoadStep(bool converged, SolveReport *repor
   PetscFunctionBeginUser;
   rho_anchor_ = 0.0;
   ncp_now_ = params_.ncp;
+  barrier_mu_ = barrier_eps_ = 0.0;
   if (!converged) {
     RestoreState(step_saved_);
     pressure_ = step_saved_pressure_;

@@ -372,11 +372,12 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionBodyCriterion) {
 // pore, which closes (between P/E 0.01 and 0.02), and the rattler is pushed
 // to where the disks around it balance it. Asserted: the equilibrium it
 // reaches (Signorini, the virial identity, the rattler's net force, a load
-// carried by several contacts), the same with both level solvers; not how
-// many iterations it takes.
+// carried by several contacts), the same with the three level solvers; not
+// how many iterations it takes.
 TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
-  double carried_by[2] = {0.0, 0.0};
-  for (LevelStrategy strategy : {LevelStrategy::Anchored, LevelStrategy::Newton}) {
+  double carried_by[3] = {0.0, 0.0, 0.0};
+  const char *const labels[] = {"newton", "anchored", "interior"};  // LevelStrategy order
+  for (LevelStrategy strategy : {LevelStrategy::Anchored, LevelStrategy::Newton, LevelStrategy::Interior}) {
     ProblemParameters p;
     p.deformable_contact = DeformableContact::Mortar;
     p.constrain_rotation = PETSC_TRUE;
@@ -393,7 +394,7 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
     LoadControlParameters load;
     load.level.strategy = strategy;
     double step = -1.0;
-    const char *label = strategy == LevelStrategy::Anchored ? "anchored" : "newton";
+    const char *label = labels[static_cast<int>(strategy)];
     for (double P : {1e-3, 0.05}) {
       LevelReport rep;
       ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
@@ -417,12 +418,13 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
         EXPECT_GE(touching, 2) << label;
         EXPECT_GT(carried, 0.1 * P) << label;
         EXPECT_LE(std::hypot(net[0], net[1]), 1e-9 * carried) << label << ": net force on the rattler";
-        carried_by[strategy == LevelStrategy::Anchored ? 0 : 1] = carried;
+        carried_by[static_cast<int>(strategy)] = carried;
       }
       CheckSignoriniCoulomb(problem, P, label);
     }
   }
-  EXPECT_NEAR(carried_by[1], carried_by[0], 1e-6 * carried_by[0]) << "both level solvers reach the same equilibrium";
+  EXPECT_NEAR(carried_by[0], carried_by[1], 1e-6 * carried_by[1]) << "newton and anchored reach the same equilibrium";
+  EXPECT_NEAR(carried_by[2], carried_by[1], 1e-6 * carried_by[1]) << "interior and anchored reach the same equilibrium";
 }
 
 // A 12-disk all-deformable packing (40-triangle disks) with two-pass

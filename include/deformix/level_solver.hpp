@@ -68,7 +68,7 @@
 
 namespace deformix {
 
-enum class LevelStrategy : int { Newton = 0, Anchored = 1 };
+enum class LevelStrategy : int { Newton = 0, Anchored = 1, Interior = 2 };
 
 struct LevelSolverParameters {
   LevelStrategy strategy = LevelStrategy::Anchored;
