@@ -18,9 +18,7 @@ constexpr double kReach = 0.2;           // shat of the clamped barrier, in cand
 constexpr double kLambdaCap = 1.0;       // lambda raised to at most this x P <d> when entering the interior
 constexpr double kDeltaInit = 1e-4;      // first shift, in E
 constexpr double kDeltaMax = 1e6;        // in E: beyond, the load step fails
-constexpr bool kDualReset = true;
-constexpr bool kTrueFraction = false;
-constexpr double kSigma = 1e10;          // lambda within [mu / (kSigma s), kSigma mu / s]
+constexpr double kSigma = 1e10;          // lambda within a factor kSigma of mu psi
 constexpr int kMeritMemory = 3;          // iterates in the nonmonotone Armijo reference
 constexpr int kHalvings = 10;            // Armijo halvings before a larger shift
 constexpr int kPolishHalvings = 6;       // polish: halvings of a step on |F|
@@ -45,7 +43,6 @@ class InteriorPoint {
   Mat J_ = nullptr;
   KSP ksp_ = nullptr;
   Vec d_ = nullptr, dx_ = nullptr, y_ = nullptr, s_ = nullptr, zt_ = nullptr, Ft_ = nullptr;
-  Vec gt_ = nullptr, kt_ = nullptr, tt_ = nullptr;  // gaps_, stiff_, target_ at the trial point
   Vec gaps_ = nullptr, stiff_ = nullptr, target_ = nullptr, weight_ = nullptr, floor_ = nullptr, body_ = nullptr,
       contact_ = nullptr, work_ = nullptr;
   double delta_in_matrix_ = 0.0;
@@ -57,7 +54,7 @@ class InteriorPoint {
 
 PetscErrorCode InteriorPoint::Destroy() {
   PetscFunctionBeginUser;
-  for (Vec *v : {&d_, &dx_, &y_, &s_, &zt_, &Ft_, &gaps_, &stiff_, &target_, &gt_, &kt_, &tt_, &weight_, &floor_, &body_, &contact_, &work_})
+  for (Vec *v : {&d_, &dx_, &y_, &s_, &zt_, &Ft_, &gaps_, &stiff_, &target_, &weight_, &floor_, &body_, &contact_, &work_})
     PetscCall(VecDestroy(v));
   PetscFunctionReturn(0);
 }
@@ -70,7 +67,7 @@ PetscErrorCode InteriorPoint::Attach() {
   PetscCall(Destroy());
   PetscCall(PetscObjectGetComm((PetscObject)z_, &comm_));
   PetscCallMPI(MPI_Comm_size(comm_, &size_));
-  for (Vec *v : {&d_, &dx_, &y_, &s_, &zt_, &Ft_, &gaps_, &stiff_, &target_, &gt_, &kt_, &tt_, &weight_, &floor_, &body_, &contact_, &work_})
+  for (Vec *v : {&d_, &dx_, &y_, &s_, &zt_, &Ft_, &gaps_, &stiff_, &target_, &weight_, &floor_, &body_, &contact_, &work_})
     PetscCall(VecDuplicate(z_, v));
   PetscCall(p_.ShiftDiagonals(floor_, weight_));
   // Masks: body and wall rows (the primal unknowns x), normal-multiplier rows.
@@ -277,7 +274,7 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
         PetscCall(KSPGetConvergedReason(ksp_, &kreason));
         ok = kreason > 0;
       }
-      double curvature = 0.0, alpha_p = 1.0, alpha_l = 1.0, full_move = 0.0;
+      double curvature = 0.0, alpha_p = 1.0, full_move = 0.0;
       struct {
         int where = -1;
         double gap = 0, lambda = 0, dgap = 0, k = 0;
@@ -292,15 +289,14 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
           // its contact rows are k_c A_c d.
           PetscCall(MatMult(J_, dx_, y_));
           PetscCall(VecDot(dx_, y_, &curvature));
-          const PetscScalar *ya, *za, *ga, *ka, *da;
+          const PetscScalar *ya, *za, *ga, *ka;
           PetscInt n;
           PetscCall(VecGetLocalSize(y_, &n));
           PetscCall(VecGetArrayRead(y_, &ya));
           PetscCall(VecGetArrayRead(z_, &za));
           PetscCall(VecGetArrayRead(gaps_, &ga));
           PetscCall(VecGetArrayRead(stiff_, &ka));
-          PetscCall(VecGetArrayRead(d_, &da));
-          double local[3] = {0.0, 1.0, 1.0};  // contact curvature, fractions for g and lambda
+          double local[2] = {0.0, 1.0};  // contact curvature, fraction to the boundary of the gaps
           PetscInt lo;
           PetscCall(VecGetOwnershipRange(y_, &lo, nullptr));
           for (PetscInt i = 0; i < n; ++i) {
@@ -313,22 +309,20 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
                 limit.gap = ga[i], limit.lambda = za[i], limit.dgap = dg, limit.k = ka[i];
               }
             }
-            if (za[i] > 0.0 && ga[i] > 0.0 && da[i] < 0.0) local[2] = std::min(local[2], kTau * za[i] / -da[i]);
           }
-          PetscCall(VecRestoreArrayRead(d_, &da));
           PetscCall(VecRestoreArrayRead(stiff_, &ka));
           PetscCall(VecRestoreArrayRead(gaps_, &ga));
           PetscCall(VecRestoreArrayRead(z_, &za));
           PetscCall(VecRestoreArrayRead(y_, &ya));
-          local[1] = -local[1], local[2] = -local[2];
+          local[1] = -local[1];
           PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &local[0], 1, MPI_DOUBLE, MPI_SUM, comm_));
-          PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &local[1], 2, MPI_DOUBLE, MPI_MAX, comm_));
+          PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &local[1], 1, MPI_DOUBLE, MPI_MAX, comm_));
           curvature += local[0];
           if (prm_.monitor && size_ == 1 && limit.where >= 0 && -local[1] < 1.0)
             PetscCall(PetscPrintf(comm_, "      gap fraction %.2e from %s (row %d): s %.2e lambda %.2e k %.2e A d %.2e\n", -local[1],
                                   p_.DescribeUnknown(p_.NaturalIndex(limit.where)).c_str(), limit.where, limit.gap,
                                   limit.lambda, limit.k, limit.dgap));
-          alpha_p = kTrueFraction ? 1.0 : -local[1], alpha_l = -local[2];
+          alpha_p = -local[1];
           ok = curvature > 0.0;
         } else {
           PetscCall(p_.ContactStepFraction(d_, &alpha_p));
@@ -344,7 +338,7 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
         const double slope = -curvature;
         const int halvings = barrier ? kHalvings : kPolishHalvings;
         for (int bt = 0; bt <= halvings && !accepted; ++bt) {
-          const double a = alpha_p * std::ldexp(1.0, -bt), al = barrier && !kDualReset ? std::min(alpha_l, alpha_p) : a;
+          const double a = alpha_p * std::ldexp(1.0, -bt), al = a;
           // s = a d on the primal rows, al d on the contact rows.
           PetscCall(VecPointwiseMult(work_, d_, contact_));
           PetscCall(VecAXPBY(s_, a, 0.0, d_));
@@ -355,14 +349,6 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
           if (barrier) {
             const double merit = p_.Merit();
             accepted = std::isfinite(merit) && !p_.Inverted() && merit <= merit0 + 1e-4 * a * slope;
-            if (accepted && kTrueFraction) {
-              // Fraction to the boundary on the gaps themselves: s >= (1 - tau) s_k.
-              PetscCall(p_.BarrierRows(gt_, kt_, tt_, contact_));
-              PetscCall(VecWAXPY(work_, -(1.0 - kTau), gaps_, gt_));
-              double lowest;
-              PetscCall(VecMin(work_, nullptr, &lowest));
-              accepted = lowest >= 0.0;
-            }
             if (prm_.monitor)
               PetscCall(PetscPrintf(comm_,
                                     "    interior %3" PetscInt_FMT "  mu %.1e  error %.1e %.1e  merit %+.10e -> %+.10e  slope %.1e  "
@@ -395,7 +381,7 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
     delta_last = delta;
     PetscCall(VecCopy(zt_, z_));
     PetscCall(VecCopy(Ft_, F_));
-    PetscCall(p_.BarrierRows(gaps_, stiff_, target_, contact_));  // (barrier: as in gt_, kt_, tt_)
+    PetscCall(p_.BarrierRows(gaps_, stiff_, target_, contact_));
     PetscCall(p_.AdoptState(z_));
     PetscCall(p_.ChangedStateMargin(active_before, &changed_margin));
     active_before = p_.ActiveSet();
@@ -411,7 +397,7 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
       PetscCall(VecGetArrayRead(contact_, &ca));
       for (PetscInt i = 0; i < n; ++i) {
         if (ca[i] == 0.0) continue;
-        if (kDualReset && za[i] <= 0.0) za[i] = ta[i], clipped = 1;
+        if (za[i] <= 0.0) za[i] = ta[i], clipped = 1;  // a multiplier the step turned negative: its barrier force
         const double lo = ta[i] / kSigma, hi = kSigma * ta[i];
         if (za[i] < lo || za[i] > hi) za[i] = std::clamp(za[i], lo, hi), clipped = 1;
       }

@@ -63,6 +63,9 @@
 //   until |R| decreases; an inner solve that has not halved its residual in
 //   -ptc_stall_its (6) iterations is cut short and retried with more damping.
 //   The SNES and its callbacks live in level_solver.cpp over a small context.
+// interior: frictionless levels as a constrained minimization of the
+//   enthalpy by a primal-dual interior-point method, then an exact
+//   active-set polish (interior_point.hpp).
 #pragma once
 #include "deformix/problem.hpp"
 
