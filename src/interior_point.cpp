@@ -86,21 +86,8 @@ PetscErrorCode InteriorPoint::Attach() {
 }
 
 PetscErrorCode InteriorPoint::Factor(double delta, bool *ok) {
-  PC pc;
-  PCFailedReason reason;
   PetscFunctionBeginUser;
-  if (delta != delta_in_matrix_) {
-    PetscCall(VecAXPBY(work_, delta - delta_in_matrix_, 0.0, weight_));
-    PetscCall(MatDiagonalSet(J_, work_, ADD_VALUES));
-    delta_in_matrix_ = delta;
-  }
-  PetscCall(KSPSetOperators(ksp_, J_, J_));
-  PetscCall(KSPSetUp(ksp_));
-  PetscCall(KSPGetPC(ksp_, &pc));
-  PetscCall(PCGetFailedReason(pc, &reason));
-  int failed = reason != PC_NOERROR;
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm_));
-  *ok = !failed;
+  PetscCall(FactorShifted(J_, ksp_, weight_, work_, delta, &delta_in_matrix_, ok));
   PetscFunctionReturn(0);
 }
 

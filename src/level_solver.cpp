@@ -133,22 +133,8 @@ PetscErrorCode MeritNewton::Evaluate(Vec z, Vec F, double *norm, double *force, 
 }
 
 PetscErrorCode MeritNewton::Factor(double rho, bool *ok) {
-  PC pc;
-  PCFailedReason reason;
   PetscFunctionBeginUser;
-  // The matrix holds J + floor + rho_in_matrix_ D: add the difference.
-  if (rho != rho_in_matrix_) {
-    PetscCall(VecAXPBY(work_, rho - rho_in_matrix_, 0.0, weight_));
-    PetscCall(MatDiagonalSet(J_, work_, ADD_VALUES));
-    rho_in_matrix_ = rho;
-  }
-  PetscCall(KSPSetOperators(ksp_, J_, J_));
-  PetscCall(KSPSetUp(ksp_));
-  PetscCall(KSPGetPC(ksp_, &pc));
-  PetscCall(PCGetFailedReason(pc, &reason));
-  int failed = reason != PC_NOERROR;
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm_));
-  *ok = !failed;
+  PetscCall(FactorShifted(J_, ksp_, weight_, work_, rho, &rho_in_matrix_, ok));
   PetscFunctionReturn(0);
 }
 
@@ -822,6 +808,27 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report)
 }
 
 }  // namespace
+
+PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift, double *in_matrix, bool *ok) {
+  PC pc;
+  PCFailedReason reason;
+  MPI_Comm comm;
+  PetscFunctionBeginUser;
+  if (shift != *in_matrix) {
+    PetscCall(VecAXPBY(work, shift - *in_matrix, 0.0, weight));
+    PetscCall(MatDiagonalSet(J, work, ADD_VALUES));
+    *in_matrix = shift;
+  }
+  PetscCall(KSPSetOperators(ksp, J, J));
+  PetscCall(KSPSetUp(ksp));
+  PetscCall(KSPGetPC(ksp, &pc));
+  PetscCall(PCGetFailedReason(pc, &reason));
+  int failed = reason != PC_NOERROR;
+  PetscCall(PetscObjectGetComm((PetscObject)ksp, &comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm));
+  *ok = !failed;
+  PetscFunctionReturn(0);
+}
 
 PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
                           SolveReport *report) {
