@@ -269,7 +269,6 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
       if (ok) {
         PetscCall(VecScale(d_, -1.0));
         PetscCall(VecPointwiseMult(dx_, d_, body_));
-        PetscCall(VecPointwiseMult(work_, dx_, weight_));
         PetscCall(VecNorm(dx_, NORM_INFINITY, &full_move));
         if (barrier) {
           // Curvature d^T (W + delta D) d + sum_c k_c (A_c d)^2 with y = J dx:
