@@ -10,7 +10,7 @@ compare the strategies on the same packing and load path. A strategy is
 SOLVER (compact's default sub-stepping) or SOLVER/POLICY, e.g.
 anchored/adaptive = -level_solver anchored -load_step_policy adaptive,
 optionally followed by ':' and more compact options, e.g.
-'anchored:-level_body_criterion true'.
+'anchored:-level_body_criterion false'.
 
 Scenes (--scenes):
   default     petsc-options/default.opts (20 disks, kappa 0.5, friction 0.2)

@@ -35,7 +35,8 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "", monitor, &monitor, nullptr));
   PetscCall(PetscOptionsBool("-level_body_criterion",
                              "anchored: the paper's level criterion also per body (net force and torque of every body "
-                             "below -level_force_rtol P <d> and P <d>^2), not only per node",
+                             "below -level_force_rtol P <d> and P <d>^2); false: per node only, which accepts bodies "
+                             "with net forces up to 1e-2 P <d> (P_sigma/P off by up to 2e-3)",
                              "", body_criterion, &body_criterion, nullptr));
   PetscCall(PetscOptionsBool("-ptc_monitor",
                              "anchored: one line per pseudo-time step (residual by block, largest unbalanced force "

@@ -276,7 +276,7 @@ TEST(CoulombLaw, SwitchMarginsOfChangedStates) {
 // in a random 20-disk mixture (kappa 0.5, friction 0.2), two levels, with
 // the deformable pairs' contact law `law`.
 void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
-                                  LevelStrategy strategy = LevelStrategy::Anchored, bool body_criterion = false) {
+                                  LevelStrategy strategy = LevelStrategy::Anchored, bool body_criterion = true) {
   DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
   assign_deformable(packing, 0.5, 1);
   ProblemParameters p;
@@ -305,7 +305,7 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
     ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
     EXPECT_LE(rep.force_residual, 1e-4 * P * problem.MeanDiameter());
     if (per_body) {
-      // A level criterion per body (newton's, or anchored's with body_criterion): net force and torque.
+      // A level criterion per body (newton's, and anchored's by default): net force and torque.
       CompactionProblem::Balance b;
       ASSERT_PETSC(problem.StateBalance(&b));
       const double d = problem.MeanDiameter();
@@ -358,9 +358,9 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionNewton) {
   CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Newton);
 }
 
-// The same with anchored and its level criterion also per body (-level_body_criterion).
-TEST(Mixture, RandomTwentyDiskMixtureWithFrictionBodyCriterion) {
-  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Anchored, true);
+// The same with anchored's level criterion per node only (-level_body_criterion false).
+TEST(Mixture, RandomTwentyDiskMixtureWithFrictionPerNodeCriterion) {
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Anchored, false);
 }
 
 // A level that crosses a rearrangement: a rigid disk (radius 0.19) sits

@@ -46,8 +46,10 @@
 //   -ptc_easy_its iterations, divided by 4 after a failed one; the anchor
 //   moves to each solution and rho vanishes with F. A sub-step is accepted at
 //   exact equilibrium (|R| <= 1e-11 E <d>) or, with -level_force_rtol tol >
-//   0, by the paper's criterion per node (|F|_inf <= tol P <d>, phi settled
-//   to -level_phi_rtol, contact rows exact). Without -ptc_move it is plain
+//   0, by the paper's criterion per node and per body (|F|_inf <= tol P <d>,
+//   the net force and torque of every body below tol P <d> and tol P <d>^2,
+//   phi settled to -level_phi_rtol, contact rows exact; -level_body_criterion
+//   false drops the per-body part). Without -ptc_move it is plain
 //   semismooth Newton.
 //   Newton stops only when |R| is below tolerance AND the set of open /
 //   sticking / sliding contacts did not change in the last iteration
@@ -79,7 +81,7 @@ struct LevelSolverParameters {
   double initial_move = 0.1;  // trust radius m at the start of a load step, in <d>
   PetscBool monitor = PETSC_FALSE;  // -level_monitor: one line per Newton iteration
   SNESLineSearchType line_search = SNESLINESEARCHBT;  // anchored: the SNES line search (-snes_linesearch_type overrides)
-  PetscBool body_criterion = PETSC_FALSE;  // anchored: the level criterion per body too (-level_body_criterion)
+  PetscBool body_criterion = PETSC_TRUE;   // anchored: the level criterion per body too (-level_body_criterion)
   PetscBool ptc_monitor = PETSC_FALSE;              // anchored: -ptc_monitor, one line per pseudo-time step
   PetscBool newton_monitor = PETSC_FALSE;           // anchored: -newton_monitor, one line per Newton iteration
   PetscBool newton_monitor_contacts = PETSC_FALSE;  // anchored: -newton_monitor_contacts
