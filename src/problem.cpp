@@ -39,6 +39,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscInt ncp_choice = ncp == NcpFunction::Min ? 0 : 1;
   const char *const ncp_names[] = {"min", "fb", "NcpFunction", "ncp_", nullptr};
   PetscInt deformable_choice = static_cast<PetscInt>(deformable_contact);
+  const char *const predictor_names[] = {"none", "secant", "tangent"};  // LoadPredictor order
+  PetscInt predictor_choice = static_cast<PetscInt>(predictor);
   const char *const deformable_names[] = {"nts", "two_pass", "mortar"};  // DeformableContact order
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Material and contact solver", "deformix");
@@ -59,8 +61,12 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsBool("-constrain_rotation",
                              "fix the mean rotation of frictionless deformable bodies (zero-energy mode; its torque is reported)",
                              "", constrain_rotation, &constrain_rotation, nullptr));
-  PetscCall(PetscOptionsBool("-secant_predictor", "start each increment from the secant extrapolation of the last two states",
-                             "", secant_predictor, &secant_predictor, nullptr));
+  PetscCall(PetscOptionsEList("-predictor",
+                              "initial guess of each load step: none (the last converged state), secant (extrapolated "
+                              "from the last two converged states) or tangent (the last state plus dP dz/dP, solved with "
+                              "its Newton matrix: one more factorization per level); halved while it would make bodies "
+                              "overlap or invert an element",
+                              "", predictor_names, 3, predictor_names[predictor_choice], &predictor_choice, nullptr));
   PetscCall(PetscOptionsInt("-ptc_easy_its", "pseudo-transient continuation: double the move after an inner solve of at most this many Newton iterations",
                             "", ptc_easy_its, &ptc_easy_its, nullptr));
   PetscCall(PetscOptionsInt("-ptc_stall_its", "pseudo-transient continuation: an inner solve that has not halved its residual after this many Newton iterations is cut short and retried with more damping",
@@ -101,6 +107,7 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscOptionsEnd();
   ncp = ncp_choice == 0 ? NcpFunction::Min : NcpFunction::FischerBurmeister;
   deformable_contact = static_cast<DeformableContact>(deformable_choice);
+  predictor = static_cast<LoadPredictor>(predictor_choice);
   PetscCheck(young > 0.0, comm, PETSC_ERR_USER_INPUT, "-E %g: Young's modulus must be positive", young);
   PetscCheck(poisson > -1.0 && poisson < 0.5, comm, PETSC_ERR_USER_INPUT,
              "-nu %g: Poisson's ratio must satisfy -1 < nu < 0.5 (nu = 0.5 is incompressible, use e.g. 0.4999)",
@@ -1213,30 +1220,74 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
   step_saved_pressure_ = pressure_;
   const State &saved = step_saved_;
   u_start_ = u_;
-  // Secant predictor along the load path: extrapolate the bodies and walls
-  // from the last two converged states (none for the first two increments:
-  // the state at P = 0 is the unloaded packing, whose settling is not a
-  // response proportional to the load).
-  // The extrapolation is halved while it would make bodies overlap by more
-  // than 1e-3 <d> or invert an element: the first Newton step has to close
-  // every predicted overlap at once, whatever the damping.
-  if (params_.secant_predictor && have_previous_ && previous_pressure_ > 0.0 && pressure_ != previous_pressure_) {
+  // Predictors along the load path (none for the first increment, and the
+  // secant none for the second: the state at P = 0 is the unloaded packing,
+  // whose settling is not a response proportional to the load). Either is
+  // halved while it would make bodies overlap by more than 1e-3 <d> or
+  // invert an element: the first Newton step has to close every predicted
+  // overlap at once, whatever the damping.
+  auto admissible = [&]() {
+    const StateSummary predicted = Summary();
+    return predicted.min_cell_area_ratio > 0.0 && predicted.max_penetration < 1e-3 * mean_diameter_ &&
+           DetectCandidates(-1e-3).empty();
+  };
+  bool tangent = false;  // the multipliers come from the tangent
+  if (params_.predictor == LoadPredictor::Secant && have_previous_ && previous_pressure_ > 0.0 &&
+      pressure_ != previous_pressure_) {
+    // Secant: extrapolate the bodies and walls from the last two converged states.
     double t = (pressure - pressure_) / (pressure_ - previous_pressure_);
     for (int attempt = 0; attempt < 5; ++attempt, t *= 0.5) {
       for (size_t i = 0; i < u_.size(); ++i) u_[i] = saved.u[i] + t * (saved.u[i] - previous_.u[i]);
       for (int k = 0; k < 4; ++k) w_[k] = saved.w[k] + t * (saved.w[k] - previous_.w[k]);
-      const StateSummary predicted = Summary();
-      if (predicted.min_cell_area_ratio > 0.0 &&
-          predicted.max_penetration < 1e-3 * mean_diameter_ &&
-          DetectCandidates(-1e-3).empty())
-        break;
+      if (admissible()) break;
       if (attempt == 4) u_ = saved.u, std::copy(saved.w, saved.w + 4, w_);
+    }
+  } else if (params_.predictor == LoadPredictor::Tangent && have_previous_ && pressure_ > 0.0 && pressure != pressure_) {
+    // Tangent: J dz = -dP dF/dP at the converged state, F depending on P only
+    // through the walls' load P grad A(w); the multipliers follow (the
+    // contact states of the converged state held fixed).
+    Vec z = nullptr, F = nullptr, dz = nullptr, zt = nullptr;
+    Mat J = nullptr;
+    KSP ksp = nullptr;
+    PetscCall(Layout(&z, &F, &J, &ksp));
+    PetscCall(NewtonMatrix(z, J));
+    PetscCall(KSPSetOperators(ksp, J, J));
+    PetscCall(KSPSetUp(ksp));
+    PC pc;
+    PCFailedReason reason;
+    PetscCall(KSPGetPC(ksp, &pc));
+    PetscCall(PCGetFailedReason(pc, &reason));
+    int ok = reason == PC_NOERROR;
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &ok, 1, MPI_INT, MPI_MIN, comm_));
+    if (ok) {
+      PetscCall(VecDuplicate(z, &dz));
+      PetscCall(VecDuplicate(z, &zt));
+      PetscCall(VecSet(F, 0.0));
+      double g[4];
+      WallBox::pressure_gradient(-(pressure - pressure_), w_, g);
+      PetscScalar *fa;
+      PetscCall(VecGetArray(F, &fa));
+      for (PetscInt i = own_lo_; i < own_hi_; ++i)
+        if (natural_of_[i] >= WallOffset() && natural_of_[i] < WallOffset() + 4) fa[i - own_lo_] = g[natural_of_[i] - WallOffset()];
+      PetscCall(VecRestoreArray(F, &fa));
+      PetscCall(KSPSolve(ksp, F, dz));
+      KSPConvergedReason kreason;
+      PetscCall(KSPGetConvergedReason(ksp, &kreason));
+      double t = 1.0;
+      for (int attempt = 0; kreason > 0 && attempt < 5 && !tangent; ++attempt, t *= 0.5) {
+        PetscCall(VecWAXPY(zt, t, dz, z));
+        PetscCall(AdoptState(zt));
+        tangent = admissible();
+      }
+      if (!tangent) PetscCall(AdoptState(z));
+      PetscCall(VecDestroy(&dz));
+      PetscCall(VecDestroy(&zt));
     }
   }
   // Contact forces scale with the pressure: for rigid disks the scaled
   // multipliers at the same geometry are the exact equilibrium of the new
   // level, for deformable ones the first-order guess.
-  if (pressure_ > 0.0 && pressure != pressure_) {
+  if (!tangent && pressure_ > 0.0 && pressure != pressure_) {
     const double scale = pressure / pressure_;
     for (double &l : lambda_) l *= scale;
     for (double &l : lambda_t_) l *= scale;

@@ -708,6 +708,36 @@ TEST(ContactProblem, SmallLoadLimitAndMonotonicity) {
   }
 }
 
+// The tangent predictor is the first-order Taylor step of the equilibrium
+// path: on the single disk, whose contact patches do not change over a 1 %
+// pressure increment, its predicted box misses the converged one by O(dP^2),
+// while the last state (predictor none) misses it by O(dP).
+TEST(ContactProblem, TangentPredictorIsSecondOrder) {
+  for (double P : {0.02, 0.2}) {
+    ProblemParameters params;
+    params.predictor = LoadPredictor::Tangent;
+    auto problem = MakeDisk(params);
+    ASSERT_TRUE(problem);
+    double step = -1.0;
+    LoadTo(*problem, 0.5 * P, &step);
+    LoadTo(*problem, P, &step);
+    const double P1 = 1.01 * P;
+    const StateSummary last = problem->Summary();
+    ASSERT_PETSC(problem->BeginLoadStep(P1));
+    const StateSummary predicted = problem->Summary();
+    SolveReport undo;
+    ASSERT_PETSC(problem->EndLoadStep(false, &undo));
+    EXPECT_EQ(problem->Summary().box_width, last.box_width) << "a failed load step restores the state";
+    LoadTo(*problem, P1, &step);
+    const StateSummary converged = problem->Summary();
+    const double err_tangent = std::hypot(predicted.box_width - converged.box_width, predicted.box_height - converged.box_height);
+    const double err_none = std::hypot(last.box_width - converged.box_width, last.box_height - converged.box_height);
+    std::printf("  P/E %g -> %g: box error of the tangent %.3e, of the last state %.3e\n", P, P1, err_tangent, err_none);
+    EXPECT_GT(err_none, 0.0);
+    EXPECT_LT(err_tangent, 0.02 * err_none);
+  }
+}
+
 // The rotation gauge must not load the body: at a frictionless equilibrium its
 // multiplier (a torque) vanishes (problem.hpp: "zero at the symmetric
 // equilibrium"). Checked both as |mu| and as the moment of the gauge forces.

@@ -95,6 +95,10 @@ namespace deformix {
 //                  boundary (mortar_node).
 enum class DeformableContact : int { NodeToSegment = 0, TwoPass = 1, Mortar = 2 };
 
+// Initial guess of a load step (BeginLoadStep): the last converged state,
+// its secant extrapolation along the load path, or its tangent dz/dP.
+enum class LoadPredictor : int { None = 0, Secant = 1, Tangent = 2 };
+
 struct ProblemParameters {
   double young = 1.0;            // E
   double poisson = 0.495;        // nu
@@ -113,7 +117,7 @@ struct ProblemParameters {
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   DeformableContact deformable_contact = DeformableContact::NodeToSegment;  // law of deformable-deformable pairs
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
-  PetscBool secant_predictor = PETSC_TRUE;    // extrapolate the initial guess along the load path
+  LoadPredictor predictor = LoadPredictor::Secant;  // initial guess of a load step (-predictor)
   double repartition_tol = 0.1;  // repartition when the new edge cut is smaller by this fraction or the imbalance exceeds 1 + this (< 0: never)
   PetscBool partition_view = PETSC_FALSE;     // print edge cut and imbalance of every (re)partition
   double progress_interval = 60.0;  // seconds between progress lines within a long sub-step (0: every pseudo-time step, < 0: none)
