@@ -32,7 +32,7 @@ class InteriorPoint {
  private:
   PetscErrorCode Attach();
   PetscErrorCode Destroy();
-  PetscErrorCode Factor(double delta, bool *ok);
+  PetscErrorCode Factor(double delta, bool *ok, bool *out_of_memory);
   PetscErrorCode Evaluate(Vec z, Vec F);       // residual, merit, gaps at z
   PetscErrorCode EnterInterior();              // eps and lambda so that the iterate is interior
   PetscErrorCode Errors(double *stationarity, double *complementarity);
@@ -85,9 +85,9 @@ PetscErrorCode InteriorPoint::Attach() {
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode InteriorPoint::Factor(double delta, bool *ok) {
+PetscErrorCode InteriorPoint::Factor(double delta, bool *ok, bool *out_of_memory) {
   PetscFunctionBeginUser;
-  PetscCall(FactorShifted(J_, ksp_, weight_, work_, delta, &delta_in_matrix_, ok));
+  PetscCall(FactorShifted(J_, ksp_, weight_, work_, delta, &delta_in_matrix_, ok, out_of_memory));
   PetscFunctionReturn(0);
 }
 
@@ -252,9 +252,19 @@ PetscErrorCode InteriorPoint::Solve(double pressure, SolveReport *report) {
     double delta = 0.0;
     bool accepted = false;
     for (;;) {
-      bool ok = false;
-      PetscCall(Factor(delta, &ok));
+      bool ok = false, out_of_memory = false;
+      PetscCall(Factor(delta, &ok, &out_of_memory));
       ++report->factorizations;
+      if (out_of_memory && p_.GrowFactorWorkspace()) {
+        // MUMPS out of workspace (INFOG(1) = -9): a new layout with a larger
+        // one, the same linearization, the same shift.
+        PetscCall(PetscInfo(nullptr, "MUMPS workspace too small (INFOG(1) = -9): enlarged\n"));
+        PetscCall(Attach());
+        PetscCall(Evaluate(z_, F_));
+        PetscCall(p_.NewtonMatrix(z_, J_));
+        delta_in_matrix_ = 0.0;
+        continue;
+      }
       if (ok) {
         KSPConvergedReason kreason;
         PetscCall(KSPSolve(ksp_, F_, d_));

@@ -88,7 +88,7 @@ class MeritNewton {
   PetscErrorCode Attach();            // the problem's layout objects, and our work vectors for them
   PetscErrorCode Destroy();
   PetscErrorCode Evaluate(Vec z, Vec F, double *norm, double *force, bool *inverted);
-  PetscErrorCode Factor(double rho, bool *ok);   // (J + floor + rho D), numeric factorization in the KSP
+  PetscErrorCode Factor(double rho, bool *ok, bool *out_of_memory, PCFailedReason *reason);  // (J + floor + rho D) in the KSP
 
   CompactionProblem &p_;
   const LevelSolverParameters &prm_;
@@ -133,9 +133,9 @@ PetscErrorCode MeritNewton::Evaluate(Vec z, Vec F, double *norm, double *force, 
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode MeritNewton::Factor(double rho, bool *ok) {
+PetscErrorCode MeritNewton::Factor(double rho, bool *ok, bool *out_of_memory, PCFailedReason *reason) {
   PetscFunctionBeginUser;
-  PetscCall(FactorShifted(J_, ksp_, weight_, work_, rho, &rho_in_matrix_, ok));
+  PetscCall(FactorShifted(J_, ksp_, weight_, work_, rho, &rho_in_matrix_, ok, out_of_memory, reason));
   PetscFunctionReturn(0);
 }
 
@@ -265,8 +265,9 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
     ++report->newton_its;
     bool accepted = false;
     while (!accepted) {
-      bool ok = false;
-      PetscCall(Factor(rho, &ok));
+      bool ok = false, out_of_memory = false;
+      PCFailedReason pc_reason = PC_NOERROR;
+      PetscCall(Factor(rho, &ok, &out_of_memory, &pc_reason));
       ++report->factorizations;
       if (ok) {
         KSPConvergedReason kreason;
@@ -277,12 +278,6 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
       if (!ok) {
         // A failed factorization: MUMPS out of workspace gets a larger one
         // (a new layout); anything else (a singular matrix) a larger shift.
-        PC pc;
-        PCFailedReason pc_reason;
-        PetscCall(KSPGetPC(ksp_, &pc));
-        PetscCall(PCGetFailedReason(pc, &pc_reason));
-        int out_of_memory = pc_reason == PC_FACTOR_OUTMEMORY;
-        PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &out_of_memory, 1, MPI_INT, MPI_MAX, comm_));
         if (out_of_memory && p_.GrowFactorWorkspace()) {
           PetscCall(PetscInfo(nullptr, "MUMPS workspace too small (INFOG(1) = -9): enlarged\n"));
           PetscCall(Attach());
@@ -810,10 +805,8 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report)
 
 }  // namespace
 
-PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift, double *in_matrix, bool *ok) {
-  PC pc;
-  PCFailedReason reason;
-  MPI_Comm comm;
+PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift, double *in_matrix, bool *ok,
+                             bool *out_of_memory, PCFailedReason *reason) {
   PetscFunctionBeginUser;
   if (shift != *in_matrix) {
     PetscCall(VecAXPBY(work, shift - *in_matrix, 0.0, weight));
@@ -821,13 +814,7 @@ PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift,
     *in_matrix = shift;
   }
   PetscCall(KSPSetOperators(ksp, J, J));
-  PetscCall(KSPSetUp(ksp));
-  PetscCall(KSPGetPC(ksp, &pc));
-  PetscCall(PCGetFailedReason(pc, &reason));
-  int failed = reason != PC_NOERROR;
-  PetscCall(PetscObjectGetComm((PetscObject)ksp, &comm));
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm));
-  *ok = !failed;
+  PetscCall(FactorOnEveryRank(ksp, ok, out_of_memory, reason));
   PetscFunctionReturn(0);
 }
 

@@ -1024,6 +1024,23 @@ PetscErrorCode CompactionProblem::BarrierRows(Vec gap, Vec stiffness, Vec target
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode FactorOnEveryRank(KSP ksp, bool *ok, bool *out_of_memory, PCFailedReason *reason) {
+  PC pc;
+  PCFailedReason local;
+  MPI_Comm comm;
+  PetscFunctionBeginUser;
+  PetscCall(KSPSetUp(ksp));
+  PetscCall(KSPGetPC(ksp, &pc));
+  PetscCall(PCGetFailedReason(pc, &local));
+  int flags[2] = {local != PC_NOERROR, local == PC_FACTOR_OUTMEMORY};
+  PetscCall(PetscObjectGetComm((PetscObject)ksp, &comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, flags, 2, MPI_INT, MPI_MAX, comm));
+  *ok = !flags[0];
+  if (out_of_memory) *out_of_memory = flags[1];
+  if (reason) *reason = local;
+  PetscFunctionReturn(0);
+}
+
 PetscErrorCode CompactionProblem::AdoptState(Vec z) {
   const PetscScalar *za;
   PetscFunctionBeginUser;
@@ -1252,13 +1269,8 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
     PetscCall(Layout(&z, &F, &J, &ksp));
     PetscCall(NewtonMatrix(z, J));
     PetscCall(KSPSetOperators(ksp, J, J));
-    PetscCall(KSPSetUp(ksp));
-    PC pc;
-    PCFailedReason reason;
-    PetscCall(KSPGetPC(ksp, &pc));
-    PetscCall(PCGetFailedReason(pc, &reason));
-    int ok = reason == PC_NOERROR;
-    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &ok, 1, MPI_INT, MPI_MIN, comm_));
+    bool ok = false;
+    PetscCall(FactorOnEveryRank(ksp, &ok));
     if (ok) {
       PetscCall(VecDuplicate(z, &dz));
       PetscCall(VecDuplicate(z, &zt));

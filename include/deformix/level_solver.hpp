@@ -91,8 +91,9 @@ struct LevelSolverParameters {
 // Numeric factorization of J + shift D in ksp, for the strategies that
 // shift the body and wall rows (newton, interior): J holds J + in_matrix D
 // on entry (D = weight, the problem's ShiftDiagonals), the difference is
-// added (work: scratch), and *ok says whether every rank factored it.
-PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift, double *in_matrix, bool *ok);
+// added (work: scratch); *ok, *out_of_memory and *reason as FactorOnEveryRank's.
+PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift, double *in_matrix, bool *ok,
+                             bool *out_of_memory = nullptr, PCFailedReason *reason = nullptr);
 
 // Solves equilibrium at pressure P from the problem's current state. On
 // success the state is updated; on failure it is left unchanged.

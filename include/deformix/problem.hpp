@@ -211,6 +211,13 @@ struct StateSummary {
   int sliding_contacts = 0;
 };
 
+// Numeric factorization of the operators of ksp (a layout's MUMPS LU; the
+// symbolic analysis is reused while the sparsity pattern holds). Collective:
+// *ok when every rank factored it; *out_of_memory when MUMPS ran out of its
+// workspace on a rank (INFOG(1) = -9: CompactionProblem::GrowFactorWorkspace,
+// then a new Layout); *reason this rank's.
+PetscErrorCode FactorOnEveryRank(KSP ksp, bool *ok, bool *out_of_memory = nullptr, PCFailedReason *reason = nullptr);
+
 class CompactionProblem {
  public:
   explicit CompactionProblem(MPI_Comm comm);
