@@ -1228,6 +1228,53 @@ PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
   PetscFunctionReturn(0);
 }
 
+// The tangent predictor (BeginLoadStep): J dz = -dP dF/dP at the converged
+// state, F depending on P only through the walls' load P grad A(w); the
+// multipliers follow (the contact states of the converged state held fixed).
+bool CompactionProblem::PredictionAdmissible() const {
+  const StateSummary predicted = Summary();
+  return predicted.min_cell_area_ratio > 0.0 && predicted.max_penetration < 1e-3 * mean_diameter_ &&
+         DetectCandidates(-1e-3).empty();
+}
+
+PetscErrorCode CompactionProblem::TangentPredictor(double dP, bool *applied) {
+  PetscFunctionBeginUser;
+  *applied = false;
+  Vec z = nullptr, F = nullptr, dz = nullptr, zt = nullptr;
+  Mat J = nullptr;
+  KSP ksp = nullptr;
+  PetscCall(Layout(&z, &F, &J, &ksp));
+  PetscCall(NewtonMatrix(z, J));
+  PetscCall(KSPSetOperators(ksp, J, J));
+  bool ok = false;
+  PetscCall(FactorOnEveryRank(ksp, &ok));
+  if (ok) {
+    PetscCall(VecDuplicate(z, &dz));
+    PetscCall(VecDuplicate(z, &zt));
+    PetscCall(VecSet(F, 0.0));
+    double g[4];
+    WallBox::pressure_gradient(-dP, w_, g);
+    PetscScalar *fa;
+    PetscCall(VecGetArray(F, &fa));
+    for (PetscInt i = own_lo_; i < own_hi_; ++i)
+      if (natural_of_[i] >= WallOffset() && natural_of_[i] < WallOffset() + 4) fa[i - own_lo_] = g[natural_of_[i] - WallOffset()];
+    PetscCall(VecRestoreArray(F, &fa));
+    PetscCall(KSPSolve(ksp, F, dz));
+    KSPConvergedReason kreason;
+    PetscCall(KSPGetConvergedReason(ksp, &kreason));
+    double t = 1.0;
+    for (int attempt = 0; kreason > 0 && attempt < 5 && !*applied; ++attempt, t *= 0.5) {
+      PetscCall(VecWAXPY(zt, t, dz, z));
+      PetscCall(AdoptState(zt));
+      *applied = PredictionAdmissible();
+    }
+    if (!*applied) PetscCall(AdoptState(z));
+    PetscCall(VecDestroy(&dz));
+    PetscCall(VecDestroy(&zt));
+  }
+  PetscFunctionReturn(0);
+}
+
 PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
   PetscFunctionBeginUser;
   layouts_at_step_ = layouts_created_;
@@ -1243,11 +1290,6 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
   // halved while it would make bodies overlap by more than 1e-3 <d> or
   // invert an element: the first Newton step has to close every predicted
   // overlap at once, whatever the damping.
-  auto admissible = [&]() {
-    const StateSummary predicted = Summary();
-    return predicted.min_cell_area_ratio > 0.0 && predicted.max_penetration < 1e-3 * mean_diameter_ &&
-           DetectCandidates(-1e-3).empty();
-  };
   bool tangent = false;  // the multipliers come from the tangent
   if (params_.predictor == LoadPredictor::Secant && have_previous_ && previous_pressure_ > 0.0 &&
       pressure_ != previous_pressure_) {
@@ -1256,45 +1298,11 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
     for (int attempt = 0; attempt < 5; ++attempt, t *= 0.5) {
       for (size_t i = 0; i < u_.size(); ++i) u_[i] = saved.u[i] + t * (saved.u[i] - previous_.u[i]);
       for (int k = 0; k < 4; ++k) w_[k] = saved.w[k] + t * (saved.w[k] - previous_.w[k]);
-      if (admissible()) break;
+      if (PredictionAdmissible()) break;
       if (attempt == 4) u_ = saved.u, std::copy(saved.w, saved.w + 4, w_);
     }
   } else if (params_.predictor == LoadPredictor::Tangent && have_previous_ && pressure_ > 0.0 && pressure != pressure_) {
-    // Tangent: J dz = -dP dF/dP at the converged state, F depending on P only
-    // through the walls' load P grad A(w); the multipliers follow (the
-    // contact states of the converged state held fixed).
-    Vec z = nullptr, F = nullptr, dz = nullptr, zt = nullptr;
-    Mat J = nullptr;
-    KSP ksp = nullptr;
-    PetscCall(Layout(&z, &F, &J, &ksp));
-    PetscCall(NewtonMatrix(z, J));
-    PetscCall(KSPSetOperators(ksp, J, J));
-    bool ok = false;
-    PetscCall(FactorOnEveryRank(ksp, &ok));
-    if (ok) {
-      PetscCall(VecDuplicate(z, &dz));
-      PetscCall(VecDuplicate(z, &zt));
-      PetscCall(VecSet(F, 0.0));
-      double g[4];
-      WallBox::pressure_gradient(-(pressure - pressure_), w_, g);
-      PetscScalar *fa;
-      PetscCall(VecGetArray(F, &fa));
-      for (PetscInt i = own_lo_; i < own_hi_; ++i)
-        if (natural_of_[i] >= WallOffset() && natural_of_[i] < WallOffset() + 4) fa[i - own_lo_] = g[natural_of_[i] - WallOffset()];
-      PetscCall(VecRestoreArray(F, &fa));
-      PetscCall(KSPSolve(ksp, F, dz));
-      KSPConvergedReason kreason;
-      PetscCall(KSPGetConvergedReason(ksp, &kreason));
-      double t = 1.0;
-      for (int attempt = 0; kreason > 0 && attempt < 5 && !tangent; ++attempt, t *= 0.5) {
-        PetscCall(VecWAXPY(zt, t, dz, z));
-        PetscCall(AdoptState(zt));
-        tangent = admissible();
-      }
-      if (!tangent) PetscCall(AdoptState(z));
-      PetscCall(VecDestroy(&dz));
-      PetscCall(VecDestroy(&zt));
-    }
+    PetscCall(TangentPredictor(pressure - pressure_, &tangent));
   }
   // Contact forces scale with the pressure: for rigid disks the scaled
   // multipliers at the same geometry are the exact equilibrium of the new

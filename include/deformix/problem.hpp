@@ -423,6 +423,12 @@ class CompactionProblem {
   PetscInt PetscIndex(PetscInt natural) const { return petsc_of_[natural]; }
 
  private:
+  // A predicted state the first Newton step can start from: no element
+  // inverted, no overlap deeper than 1e-3 <d> (BeginLoadStep).
+  bool PredictionAdmissible() const;
+  // The tangent predictor of BeginLoadStep: the state becomes z + t dP dz/dP
+  // with the largest admissible t in 1, 1/2, ..., 1/16 (*applied), or stays z.
+  PetscErrorCode TangentPredictor(double dP, bool *applied);
   // Kinematics of one candidate at state z, on at most kMaxDofs global unknowns (-1: absent).
   struct LocalContact {
     PairKinematics k;
