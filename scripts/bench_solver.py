@@ -16,9 +16,10 @@ Scenes (--scenes):
   default     petsc-options/default.opts (20 disks, kappa 0.5, friction 0.2)
   campaign50  the eight 50-disk runs kappa {0.2, 0.5, 0.8, 1} x friction {0, 0.2}
   frictionless  the default scene with friction 0 and the four frictionless 50-disk runs
+  frictional  the default scene and the four frictional (0.2) 50-disk runs
   large400    400 disks, kappa 0.5 friction 0.2 and kappa 1 friction 0
   paper1500   petsc-options/paper.opts (1500 disks) on --ranks ranks
---pressures replaces the pressure list of campaign50, large400 and paper1500.
+--pressures replaces the pressure list of the 50-, 400- and 1500-disk runs.
 
 Outputs: <out>.csv (one row per level and run; '#' lines: machine, commit,
 command) and <out>.png (Newton iterations per level and seconds per run).
@@ -69,6 +70,12 @@ def scene_runs(a):
             for k in (0.2, 0.5, 0.8, 1.0):
                 runs.append((s, f"n50_k{k:g}_mu0", 1, ["-n_particles", "50", "-kappa", str(k), "-friction", "0",
                                                        "-pressures", p or CAMPAIGN_PRESSURES]))
+        elif s == "frictional":
+            # The default scene and the four frictional 50-disk campaign runs.
+            runs.append((s, "n20_k0.5_mu0.2", 1, ["-options_file", os.path.join(ROOT, "petsc-options", "default.opts")]))
+            for k in (0.2, 0.5, 0.8, 1.0):
+                runs.append((s, f"n50_k{k:g}_mu0.2", 1, ["-n_particles", "50", "-kappa", str(k), "-friction", "0.2",
+                                                         "-pressures", p or CAMPAIGN_PRESSURES]))
         elif s == "large400":
             for k, mu in ((0.5, 0.2), (1.0, 0.0)):
                 runs.append((s, f"n400_k{k:g}_mu{mu:g}", 1, ["-n_particles", "400", "-kappa", str(k), "-friction", str(mu),
@@ -77,7 +84,7 @@ def scene_runs(a):
             opts = ["-options_file", os.path.join(ROOT, "petsc-options", "paper.opts"), "-kappa", "0.5", "-friction", "0.2"]
             runs.append((s, "n1500_k0.5_mu0.2", a.ranks, opts + (["-pressures", p] if p else [])))
         else:
-            sys.exit(f"unknown scene {s}: use default, campaign50, frictionless, large400 or paper1500")
+            sys.exit(f"unknown scene {s}: use default, campaign50, frictionless, frictional, large400 or paper1500")
     return runs
 
 
@@ -178,7 +185,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", nargs="+", default=["default"])
     ap.add_argument("--strategies", nargs="+", default=["anchored", "newton"])
-    ap.add_argument("--pressures", default="", help="P/E list for campaign50, large400, paper1500")
+    ap.add_argument("--pressures", default="", help="P/E list of the 50-, 400- and 1500-disk runs")
     ap.add_argument("--ranks", type=int, default=2, help="MPI ranks of paper1500")
     ap.add_argument("--jobs", type=int, default=1, help="simulations at a time")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")

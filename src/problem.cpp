@@ -1233,8 +1233,14 @@ PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
 // multipliers follow (the contact states of the converged state held fixed).
 bool CompactionProblem::PredictionAdmissible() const {
   const StateSummary predicted = Summary();
-  return predicted.min_cell_area_ratio > 0.0 && predicted.max_penetration < 1e-3 * mean_diameter_ &&
-         DetectCandidates(-1e-3).empty();
+  const bool admissible = predicted.min_cell_area_ratio > 0.0 && predicted.max_penetration < 1e-3 * mean_diameter_ &&
+                          DetectCandidates(-1e-3).empty();
+  // -info: why a prediction was halved (on deformable packings beyond P/E ~
+  // 0.1 the growing contact patches make every prediction overlap by more;
+  // admitting such overlaps was measured slower, docs/level-solver.md).
+  PetscInfo(nullptr, "predicted state %s: smallest cell area ratio %g, deepest overlap %g <d>\n",
+            admissible ? "taken" : "rejected", predicted.min_cell_area_ratio, predicted.max_penetration / mean_diameter_);
+  return admissible;
 }
 
 PetscErrorCode CompactionProblem::TangentPredictor(double dP, bool *applied) {
