@@ -1228,9 +1228,6 @@ PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
   PetscFunctionReturn(0);
 }
 
-// The tangent predictor (BeginLoadStep): J dz = -dP dF/dP at the converged
-// state, F depending on P only through the walls' load P grad A(w); the
-// multipliers follow (the contact states of the converged state held fixed).
 bool CompactionProblem::PredictionAdmissible() const {
   const StateSummary predicted = Summary();
   const bool admissible = predicted.min_cell_area_ratio > 0.0 && predicted.max_penetration < 1e-3 * mean_diameter_ &&
@@ -1243,6 +1240,9 @@ bool CompactionProblem::PredictionAdmissible() const {
   return admissible;
 }
 
+// The tangent predictor (BeginLoadStep): J dz = -dP dF/dP at the converged
+// state, F depending on P only through the walls' load P grad A(w); the
+// multipliers follow (the contact states of the converged state held fixed).
 PetscErrorCode CompactionProblem::TangentPredictor(double dP, bool *applied) {
   PetscFunctionBeginUser;
   *applied = false;
