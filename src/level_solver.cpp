@@ -12,16 +12,20 @@ namespace deformix {
 
 PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
   PetscInt choice = static_cast<PetscInt>(strategy);
-  const char *const names[] = {"newton", "anchored", "interior"};  // LevelStrategy order
+  const char *const names[] = {"newton", "anchored", "interior", "hybrid"};  // LevelStrategy order
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Level solver", "deformix");
   PetscCall(PetscOptionsEList("-level_solver",
                               "equilibrium of a load step: newton (pseudo-transient continuation with one semismooth "
                               "Newton step per pseudo-time step, each step accepted by the residual of its proximal "
                               "subproblem) or anchored (pseudo-transient continuation, each pseudo-time step solved to "
-                              "convergence: -ptc_*) or interior (frictionless levels only: primal-dual interior point "
-                              "on the enthalpy with a barrier on the gaps, then an exact active-set polish)",
-                              "", names, 3, names[choice], &choice, nullptr));
+                              "convergence: -ptc_*) or hybrid (a newton attempt of -level_attempt_its linearizations "
+                              "from the tangent predictor, then anchored from where it stopped) or interior "
+                              "(frictionless levels only: primal-dual interior point on the enthalpy with a barrier on "
+                              "the gaps, then an exact active-set polish)",
+                              "", names, 4, names[choice], &choice, nullptr));
+  PetscCall(PetscOptionsInt("-level_attempt_its", "hybrid: linearizations of the newton attempt before anchored takes over", "",
+                            attempt_its, &attempt_its, nullptr));
   PetscCall(PetscOptionsInt("-level_max_its", "newton: linearizations per load step before the step is cut", "", max_its,
                             &max_its, nullptr));
   PetscCall(PetscOptionsReal("-level_initial_move",
@@ -52,6 +56,8 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "", newton_monitor_contacts, &newton_monitor_contacts, nullptr));
   PetscOptionsEnd();
   strategy = static_cast<LevelStrategy>(choice);
+  PetscCheck(attempt_its >= 1, comm, PETSC_ERR_USER_INPUT, "-level_attempt_its %" PetscInt_FMT " must be >= 1",
+             attempt_its);
   PetscCheck(max_its >= 1, comm, PETSC_ERR_USER_INPUT, "-level_max_its %" PetscInt_FMT " must be >= 1", max_its);
   PetscCheck(initial_move > 0.0 && std::isfinite(initial_move), comm, PETSC_ERR_USER_INPUT,
              "-level_initial_move %g must be positive", initial_move);
@@ -76,13 +82,19 @@ PetscErrorCode DestroyAll(std::initializer_list<Vec *> vecs) {
 constexpr double kMaxMove = 0.5;        // trust radius cap, in <d>
 constexpr int kMaxRejections = 12;      // rejected trial steps in a row before the load step fails
 constexpr int kBacktracks = 4;          // step fractions 1, 1/2, 1/4, 1/8 tried before a larger shift
+constexpr double kAttemptOverlap = 0.1; // hybrid: deepest overlap of the newton attempt's predicted state, in <d>
 
 // The iteration of one load step (level_solver.hpp, "newton").
 class MeritNewton {
  public:
   MeritNewton(CompactionProblem &problem, const LevelSolverParameters &params) : p_(problem), prm_(params) {}
   ~MeritNewton() { Destroy(); }
-  PetscErrorCode Solve(double pressure, SolveReport *report);
+  // With left_open, the attempt of hybrid: the tangent predictor with
+  // overlaps up to kAttemptOverlap, at most prm_.attempt_its linearizations;
+  // on failure the load step is left open at the last accepted iterate
+  // (*left_open) when anchored can start from it (no overlap deeper than the
+  // predictors' limit), else undone.
+  PetscErrorCode Solve(double pressure, SolveReport *report, bool *left_open = nullptr);
 
  private:
   PetscErrorCode Attach();            // the problem's layout objects, and our work vectors for them
@@ -139,10 +151,14 @@ PetscErrorCode MeritNewton::Factor(double rho, bool *ok, bool *out_of_memory, PC
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
+PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *left_open) {
   PetscFunctionBeginUser;
+  const bool attempt = left_open != nullptr;
+  if (attempt) *left_open = false;
   *report = SolveReport();
-  PetscCall(p_.BeginLoadStep(pressure));
+  if (attempt) PetscCall(p_.BeginLoadStep(pressure, LoadPredictor::Tangent, kAttemptOverlap));
+  else PetscCall(p_.BeginLoadStep(pressure));
+  const PetscInt max_its = attempt ? prm_.attempt_its : prm_.max_its;
   PetscCall(Attach());
   const double dmean = p_.MeanDiameter();
   const double atol = 1e-11 * p_.Parameters().young * dmean;
@@ -240,7 +256,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
         continue;
       }
     }
-    if (report->newton_its >= prm_.max_its) {
+    if (report->newton_its >= max_its) {
       report->reason = SNES_DIVERGED_MAX_IT;
       break;
     }
@@ -368,6 +384,13 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report) {
   report->force_residual = force;
   report->inner_solves = 1;
   if (converged) report->reason = SNES_CONVERGED_FNORM_ABS;
+  if (attempt && !converged) {
+    PetscCall(p_.AdoptState(z_));
+    if (p_.PredictionAdmissible(CompactionProblem::kPredictionOverlap)) {
+      *left_open = true;
+      PetscFunctionReturn(0);
+    }
+  }
   PetscCall(p_.EndLoadStep(converged, report));
   PetscFunctionReturn(0);
 }
@@ -381,7 +404,8 @@ class AnchoredContinuation {
  public:
   AnchoredContinuation(CompactionProblem &problem, const LevelSolverParameters &params) : p_(problem), prm_(params) {}
   ~AnchoredContinuation() { Destroy(); }
-  PetscErrorCode Solve(double pressure, SolveReport *report);
+  // begun: the load step was begun by a newton attempt (hybrid); go on from its iterate.
+  PetscErrorCode Solve(double pressure, SolveReport *report, bool begun = false);
 
  private:
   PetscErrorCode Attach();  // the problem's layout, and an SNES for it
@@ -637,10 +661,10 @@ PetscErrorCode AnchoredContinuation::Backtrack(SNESLineSearch ls, Vec X, Vec Y, 
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report) {
+PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report, bool begun) {
   PetscFunctionBeginUser;
   *report = SolveReport();
-  PetscCall(p_.BeginLoadStep(pressure));
+  if (!begun) PetscCall(p_.BeginLoadStep(pressure));
   // Pseudo-transient continuation (-ptc_move > 0). The equations get the term
   // rho_a D (z - z_a), z_a the state at the start of the inner solve: each
   // SNES solve is an implicit step of an overdamped dynamics in which
@@ -825,6 +849,25 @@ PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameter
     AnchoredContinuation solver(problem, params);
     PetscCall(solver.Solve(pressure, report));
     report->factorizations = static_cast<int>(report->newton_its);  // one LU per Newton iteration
+    PetscFunctionReturn(0);
+  }
+  if (params.strategy == LevelStrategy::Hybrid) {
+    SolveReport first;
+    bool left_open = false;
+    {
+      MeritNewton attempt(problem, params);
+      PetscCall(attempt.Solve(pressure, &first, &left_open));
+    }
+    if (first.converged) {
+      *report = first;
+      PetscFunctionReturn(0);
+    }
+    AnchoredContinuation solver(problem, params);
+    PetscCall(solver.Solve(pressure, report, left_open));
+    report->factorizations = static_cast<int>(report->newton_its) + first.factorizations;
+    report->newton_its += first.newton_its;
+    report->inner_solves += first.inner_solves;
+    report->candidate_refreshes += first.candidate_refreshes;
     PetscFunctionReturn(0);
   }
   if (params.strategy == LevelStrategy::Interior) {

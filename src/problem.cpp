@@ -1228,10 +1228,11 @@ PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
   PetscFunctionReturn(0);
 }
 
-bool CompactionProblem::PredictionAdmissible() const {
+bool CompactionProblem::PredictionAdmissible(double overlap_limit) const {
   const StateSummary predicted = Summary();
-  const bool admissible = predicted.min_cell_area_ratio > 0.0 && predicted.max_penetration < 1e-3 * mean_diameter_ &&
-                          DetectCandidates(-1e-3).empty();
+  const bool admissible = predicted.min_cell_area_ratio > 0.0 &&
+                          predicted.max_penetration < overlap_limit * mean_diameter_ &&
+                          DetectCandidates(-overlap_limit).empty();
   // -info: why a prediction was halved (on deformable packings beyond P/E ~
   // 0.1 the growing contact patches make every prediction overlap by more;
   // admitting such overlaps was measured slower, docs/level-solver.md).
@@ -1243,7 +1244,7 @@ bool CompactionProblem::PredictionAdmissible() const {
 // The tangent predictor (BeginLoadStep): J dz = -dP dF/dP at the converged
 // state, F depending on P only through the walls' load P grad A(w); the
 // multipliers follow (the contact states of the converged state held fixed).
-PetscErrorCode CompactionProblem::TangentPredictor(double dP, bool *applied) {
+PetscErrorCode CompactionProblem::TangentPredictor(double dP, double overlap_limit, bool *applied) {
   PetscFunctionBeginUser;
   *applied = false;
   Vec z = nullptr, F = nullptr, dz = nullptr, zt = nullptr;
@@ -1272,7 +1273,7 @@ PetscErrorCode CompactionProblem::TangentPredictor(double dP, bool *applied) {
     for (int attempt = 0; kreason > 0 && attempt < 5 && !*applied; ++attempt, t *= 0.5) {
       PetscCall(VecWAXPY(zt, t, dz, z));
       PetscCall(AdoptState(zt));
-      *applied = PredictionAdmissible();
+      *applied = PredictionAdmissible(overlap_limit);
     }
     if (!*applied) PetscCall(AdoptState(z));
     PetscCall(VecDestroy(&dz));
@@ -1281,7 +1282,7 @@ PetscErrorCode CompactionProblem::TangentPredictor(double dP, bool *applied) {
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
+PetscErrorCode CompactionProblem::BeginLoadStep(double pressure, LoadPredictor predictor, double overlap_limit) {
   PetscFunctionBeginUser;
   layouts_at_step_ = layouts_created_;
   ncp_now_ = params_.ncp;
@@ -1293,22 +1294,22 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure) {
   // Predictors along the load path (none for the first increment, and the
   // secant none for the second: the state at P = 0 is the unloaded packing,
   // whose settling is not a response proportional to the load). Either is
-  // halved while it would make bodies overlap by more than 1e-3 <d> or
-  // invert an element: the first Newton step has to close every predicted
-  // overlap at once, whatever the damping.
+  // halved while it would make bodies overlap by more than overlap_limit
+  // <d> or invert an element: the first Newton step has to close every
+  // predicted overlap at once, and a strongly damped one closes it slowly.
   bool tangent = false;  // the multipliers come from the tangent
-  if (params_.predictor == LoadPredictor::Secant && have_previous_ && previous_pressure_ > 0.0 &&
+  if (predictor == LoadPredictor::Secant && have_previous_ && previous_pressure_ > 0.0 &&
       pressure_ != previous_pressure_) {
     // Secant: extrapolate the bodies and walls from the last two converged states.
     double t = (pressure - pressure_) / (pressure_ - previous_pressure_);
     for (int attempt = 0; attempt < 5; ++attempt, t *= 0.5) {
       for (size_t i = 0; i < u_.size(); ++i) u_[i] = saved.u[i] + t * (saved.u[i] - previous_.u[i]);
       for (int k = 0; k < 4; ++k) w_[k] = saved.w[k] + t * (saved.w[k] - previous_.w[k]);
-      if (PredictionAdmissible()) break;
+      if (PredictionAdmissible(overlap_limit)) break;
       if (attempt == 4) u_ = saved.u, std::copy(saved.w, saved.w + 4, w_);
     }
-  } else if (params_.predictor == LoadPredictor::Tangent && have_previous_ && pressure_ > 0.0 && pressure != pressure_) {
-    PetscCall(TangentPredictor(pressure - pressure_, &tangent));
+  } else if (predictor == LoadPredictor::Tangent && have_previous_ && pressure_ > 0.0 && pressure != pressure_) {
+    PetscCall(TangentPredictor(pressure - pressure_, overlap_limit, &tangent));
   }
   // Contact forces scale with the pressure: for rigid disks the scaled
   // multipliers at the same geometry are the exact equilibrium of the new

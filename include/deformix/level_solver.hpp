@@ -65,6 +65,14 @@
 //   until |R| decreases; an inner solve that has not halved its residual in
 //   -ptc_stall_its (6) iterations is cut short and retried with more damping.
 //   The SNES and its callbacks live in level_solver.cpp over a small context.
+// hybrid: a newton attempt of at most -level_attempt_its linearizations,
+//   started from the tangent predictor with overlaps up to 0.1 <d> admitted
+//   (newton's first steps move bodies by 0.1 <d> and more, so it closes such
+//   overlaps in a step or two, where anchored's damped first steps would
+//   creep). A level that only deforms the packing converges there. When it
+//   does not, anchored goes on from the attempt's last iterate if no body
+//   overlaps there by more than 1e-3 <d> (else from the undone load step),
+//   and the level counts the iterations of both.
 // interior: frictionless levels as a constrained minimization of the
 //   enthalpy by a primal-dual interior-point method, then an exact
 //   active-set polish (interior_point.hpp).
@@ -73,11 +81,12 @@
 
 namespace deformix {
 
-enum class LevelStrategy : int { Newton = 0, Anchored = 1, Interior = 2 };
+enum class LevelStrategy : int { Newton = 0, Anchored = 1, Interior = 2, Hybrid = 3 };
 
 struct LevelSolverParameters {
   LevelStrategy strategy = LevelStrategy::Anchored;
   PetscInt max_its = 200;     // linearizations per load step before it counts as failed
+  PetscInt attempt_its = 30;  // hybrid: linearizations of the newton attempt
   double initial_move = 0.1;  // trust radius m at the start of a load step, in <d>
   PetscBool monitor = PETSC_FALSE;  // -level_monitor: one line per Newton iteration
   SNESLineSearchType line_search = SNESLINESEARCHBT;  // anchored: the SNES line search (-snes_linesearch_type overrides)

@@ -240,9 +240,18 @@ class CompactionProblem {
 
   // ---- What a level solver (level_solver.hpp) drives: the operator. ----
   // Starts a load step to pressure P: saves the state (EndLoadStep(false)
-  // restores it), predicts the new state along the load path, scales the
-  // multipliers with the pressure and refreshes the contact candidates.
-  PetscErrorCode BeginLoadStep(double pressure);
+  // restores it), predicts the new state along the load path (with
+  // `predictor`, halved while bodies would overlap by more than
+  // overlap_limit <d>), scales the multipliers with the pressure and
+  // refreshes the contact candidates.
+  PetscErrorCode BeginLoadStep(double pressure) { return BeginLoadStep(pressure, params_.predictor, kPredictionOverlap); }
+  PetscErrorCode BeginLoadStep(double pressure, LoadPredictor predictor, double overlap_limit);
+  // The deepest overlap of a predicted state, in <d>, for strategies whose
+  // first steps are strongly damped (anchored, interior).
+  static constexpr double kPredictionOverlap = 1e-3;
+  // A state the first Newton step of a load step can start from: no element
+  // inverted, no overlap deeper than overlap_limit <d> (BeginLoadStep).
+  bool PredictionAdmissible(double overlap_limit) const;
   // Ends the load step: a converged one becomes the predictor's last state
   // (report: converged, layouts, active contacts); a failed one is undone.
   PetscErrorCode EndLoadStep(bool converged, SolveReport *report);
@@ -423,12 +432,9 @@ class CompactionProblem {
   PetscInt PetscIndex(PetscInt natural) const { return petsc_of_[natural]; }
 
  private:
-  // A predicted state the first Newton step can start from: no element
-  // inverted, no overlap deeper than 1e-3 <d> (BeginLoadStep).
-  bool PredictionAdmissible() const;
   // The tangent predictor of BeginLoadStep: the state becomes z + t dP dz/dP
   // with the largest admissible t in 1, 1/2, ..., 1/16 (*applied), or stays z.
-  PetscErrorCode TangentPredictor(double dP, bool *applied);
+  PetscErrorCode TangentPredictor(double dP, double overlap_limit, bool *applied);
   // Kinematics of one candidate at state z, on at most kMaxDofs global unknowns (-1: absent).
   struct LocalContact {
     PairKinematics k;
