@@ -11,9 +11,11 @@ static const char help[] =
     "released; -settle_frictionless); each level of -pressures (P/E) is reached quasistatically in one\n"
     "sub-step, halved while its solve fails (-load_step_policy), each level being equilibrium of\n"
     "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
-    "solved by semismooth Newton (MUMPS LU) inside pseudo-transient continuation: -level_solver anchored\n"
-    "(default) solves every pseudo-time step to convergence, -level_solver newton takes one Newton step per\n"
-    "pseudo-time step, accepted by the residual of its proximal subproblem, and accepts a level per body.\n"
+    "solved by semismooth Newton (MUMPS LU) inside pseudo-transient continuation: -level_solver newton\n"
+    "takes one Newton step per pseudo-time step, accepted by the residual of its proximal subproblem,\n"
+    "-level_solver anchored solves every pseudo-time step to convergence, and -level_solver hybrid\n"
+    "(default) tries newton for -level_attempt_its linearizations and goes on with anchored from there.\n"
+    "Levels are accepted per body (net force and torque of every body).\n"
     "Deformable pairs meet through a mortar (cell-averaged) gap of the slave's boundary nodes against\n"
     "the master's contact curve (-contact_deformable mortar; nts and two_pass are node-to-segment).\n"
     "A level is accepted at exact equilibrium or by the paper's criterion: unbalanced forces\n"
@@ -33,7 +35,7 @@ static const char help[] =
     "each Newton iteration with the numbers of closed and sliding contacts, -newton_monitor_contacts\n"
     "the contacts whose state changed (to see an active-set cycle), -ptc_monitor each\n"
     "pseudo-time step (residual by block, largest unbalanced force and where it acts), -level_monitor each\n"
-    "trial step of -level_solver newton; without them,\n"
+    "trial step of -level_solver newton (and of hybrid's attempt); without them,\n"
     "a sub-step that runs long prints a progress line every -progress_interval seconds (default 60).\n\n";
 
 #include <petscsnes.h>
@@ -206,7 +208,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   if (HelpRequested()) PetscFunctionReturn(0);
   PetscCheck(load.level.strategy != LevelStrategy::Interior || params.friction == 0.0, comm, PETSC_ERR_USER_INPUT,
              "-level_solver interior solves frictionless levels only (the Coulomb law has no potential): use -friction 0, "
-             "or -level_solver anchored or newton with -friction %g",
+             "or -level_solver hybrid, anchored or newton with -friction %g",
              params.friction);
   PetscCall(CheckUnknownOptions(comm));
   // A user packing is read (and refused if bad) before anything is written;
@@ -322,7 +324,16 @@ PetscErrorCode Run(MPI_Comm comm) {
   CompactionProblem problem(comm);
   PetscCall(problem.SetParameters(params));
   const int n_deformable = problem.AddPacking(packing, unit_mesh);
-  if (restarting) PetscCall(problem.RestoreSnapshot(restart.state));
+  if (restarting) {
+    PetscCall(problem.RestoreSnapshot(restart.state));
+    // The operator of the restored state, which an uninterrupted run holds
+    // from the level before: the next level's first Newton matrix (the
+    // tangent predictor's) then costs no symbolic analysis in either run.
+    Vec z, F;
+    Mat J;
+    KSP ksp;
+    PetscCall(problem.Layout(&z, &F, &J, &ksp));
+  }
   PetscCall(WritePackingCsv(comm, opts.output_dir + "/packing.csv", packing));
   PetscCall(PetscPrintf(comm,
                         "compact: %d particles (%d deformable, %d triangles each; %d rigid), kappa = %g, friction = %g,"

@@ -79,6 +79,35 @@ PetscErrorCode DestroyAll(std::initializer_list<Vec *> vecs) {
   PetscFunctionReturn(0);
 }
 
+// A heartbeat for long load steps, one line per -progress_interval seconds
+// after a pseudo-time step (a newton iteration, or an inner solve of
+// anchored): rank 0's clock decides, so the ranks agree on whether to print.
+class Progress {
+ public:
+  explicit Progress(CompactionProblem &problem) : p_(problem) { PetscTime(&t_start_), t_last_ = t_start_; }
+  PetscErrorCode Step(MPI_Comm comm, double pressure, int step, PetscInt its, double force, const char *extra = "") {
+    const ProblemParameters &pp = p_.Parameters();
+    PetscFunctionBeginUser;
+    if (pp.progress_interval < 0.0) PetscFunctionReturn(0);
+    PetscLogDouble now;
+    PetscCall(PetscTime(&now));
+    int due = now - t_last_ >= pp.progress_interval;
+    PetscCallMPI(MPI_Bcast(&due, 1, MPI_INT, 0, comm));
+    if (!due) PetscFunctionReturn(0);
+    t_last_ = now;
+    PetscCall(PetscPrintf(comm,
+                          "    ... P/E %.4g: pseudo-time step %d, %" PetscInt_FMT " Newton its, |F|_inf %.2e P<d>"
+                          " (level criterion %.0e), phi %.6f%s, %.0f s in this sub-step\n",
+                          pressure / pp.young, step, its, force / (std::max(pressure, 1e-300) * p_.MeanDiameter()),
+                          pp.level_force_rtol, p_.PackingFraction(), extra, now - t_start_));
+    PetscFunctionReturn(0);
+  }
+
+ private:
+  CompactionProblem &p_;
+  PetscLogDouble t_start_, t_last_;
+};
+
 constexpr double kMaxMove = 0.5;        // trust radius cap, in <d>
 constexpr int kMaxRejections = 12;      // rejected trial steps in a row before the load step fails
 constexpr int kBacktracks = 4;          // step fractions 1, 1/2, 1/4, 1/8 tried before a larger shift
@@ -87,7 +116,8 @@ constexpr double kAttemptOverlap = 0.1; // hybrid: deepest overlap of the newton
 // The iteration of one load step (level_solver.hpp, "newton").
 class MeritNewton {
  public:
-  MeritNewton(CompactionProblem &problem, const LevelSolverParameters &params) : p_(problem), prm_(params) {}
+  MeritNewton(CompactionProblem &problem, const LevelSolverParameters &params, Progress &progress)
+      : p_(problem), prm_(params), progress_(progress) {}
   ~MeritNewton() { Destroy(); }
   // With left_open, the attempt of hybrid: the tangent predictor with
   // overlaps up to kAttemptOverlap, at most prm_.attempt_its linearizations;
@@ -104,6 +134,7 @@ class MeritNewton {
 
   CompactionProblem &p_;
   const LevelSolverParameters &prm_;
+  Progress &progress_;
   Vec z_ = nullptr, F_ = nullptr;     // the problem's (layout) vectors
   Mat J_ = nullptr;
   KSP ksp_ = nullptr;
@@ -164,10 +195,6 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
   const double atol = 1e-11 * p_.Parameters().young * dmean;
   const double detect_every = 0.4 * p_.Parameters().contact_margin * dmean;
   const double relaxed_tol = p_.Parameters().level_force_rtol, phi_tol = p_.Parameters().level_phi_rtol;
-  const double progress_interval = p_.Parameters().progress_interval;
-  PetscLogDouble t_start, t_progress;
-  PetscCall(PetscTime(&t_start));
-  t_progress = t_start;
   double fnorm, force, phi = 0.0, phi_before = 0.0;
   bool inverted;
   // The iterate z: its residual F(z), and phi for the level criterion.
@@ -260,21 +287,6 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
       report->reason = SNES_DIVERGED_MAX_IT;
       break;
     }
-    if (progress_interval >= 0.0 && !prm_.monitor) {
-      // A heartbeat for long load steps; rank 0's clock decides, so the ranks agree on whether to print.
-      PetscLogDouble now;
-      PetscCall(PetscTime(&now));
-      int due = now - t_progress >= progress_interval;
-      PetscCallMPI(MPI_Bcast(&due, 1, MPI_INT, 0, comm_));
-      if (due) {
-        t_progress = now;
-        PetscCall(PetscPrintf(comm_,
-                              "    ... P/E %.4g: %" PetscInt_FMT " Newton its, |F| %.2e, largest force %.2e P<d>, "
-                              "trust radius %.1e <d>, %.0f s in this load step\n",
-                              pressure / p_.Parameters().young, report->newton_its, fnorm,
-                              force / (std::max(pressure, 1e-300) * dmean), move, now - t_start));
-      }
-    }
     // One linearization per iteration.
     PetscCall(p_.NewtonMatrix(z_, J_));
     rho_in_matrix_ = 0.0;
@@ -365,6 +377,11 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         move = std::min(4.0 * move, kMaxMove);
         PetscCall(anchor());
         gnorm = fnorm;
+        if (!prm_.monitor) {
+          char radius[64];
+          PetscCall(PetscSNPrintf(radius, sizeof radius, ", trust radius %.1e <d>", move));
+          PetscCall(progress_.Step(comm_, pressure, static_cast<int>(report->newton_its), report->newton_its, force, radius));
+        }
         break;
       }
       // No acceptable step: a shorter radius, anchored at the iterate.
@@ -402,10 +419,12 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
 // anchor term of SetAnchor), the Newton matrix and the contact states.
 class AnchoredContinuation {
  public:
-  AnchoredContinuation(CompactionProblem &problem, const LevelSolverParameters &params) : p_(problem), prm_(params) {}
+  AnchoredContinuation(CompactionProblem &problem, const LevelSolverParameters &params, Progress &progress)
+      : p_(problem), prm_(params), progress_(progress) {}
   ~AnchoredContinuation() { Destroy(); }
-  // begun: the load step was begun by a newton attempt (hybrid); go on from its iterate.
-  PetscErrorCode Solve(double pressure, SolveReport *report, bool begun = false);
+  // After hybrid's newton attempt (its report): the counts go on from it,
+  // and with begun the load step is still open at its last iterate.
+  PetscErrorCode Solve(double pressure, SolveReport *report, const SolveReport *attempt = nullptr, bool begun = false);
 
  private:
   PetscErrorCode Attach();  // the problem's layout, and an SNES for it
@@ -421,6 +440,7 @@ class AnchoredContinuation {
 
   CompactionProblem &p_;
   const LevelSolverParameters &prm_;
+  Progress &progress_;
   SNES snes_ = nullptr;
   Vec z_ = nullptr, F_ = nullptr;  // the problem's (layout) vectors
   Mat J_ = nullptr;
@@ -661,9 +681,15 @@ PetscErrorCode AnchoredContinuation::Backtrack(SNESLineSearch ls, Vec X, Vec Y, 
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report, bool begun) {
+PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report, const SolveReport *attempt, bool begun) {
   PetscFunctionBeginUser;
   *report = SolveReport();
+  if (attempt) {  // its counts go on from the attempt's (one pseudo-time step per newton iteration)
+    report->newton_its = attempt->newton_its;
+    report->inner_solves = attempt->inner_solves;
+    report->candidate_refreshes = attempt->candidate_refreshes;
+  }
+  const int steps_before = static_cast<int>(report->newton_its);
   if (!begun) PetscCall(p_.BeginLoadStep(pressure));
   // Pseudo-transient continuation (-ptc_move > 0). The equations get the term
   // rho_a D (z - z_a), z_a the state at the start of the inner solve: each
@@ -687,9 +713,6 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   const int max_outer = static_cast<int>(pp.ptc_max_steps);
   int failures = 0;  // failed inner solves in a row
   double phi_last = -1.0;
-  PetscLogDouble t_start, t_progress;
-  PetscCall(PetscTime(&t_start));
-  t_progress = t_start;
   double force_residual = 0.0;
   if (ptc) {
     PetscCall(Attach());
@@ -776,23 +799,8 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
                             outer, (double)true_norm, part[0], part[1], part[2], part[3], part[4], force_residual, phi, move, its,
                             stale ? "  (candidates refreshed)" : ""));
     }
-    if (pp.progress_interval >= 0.0 && !prm_.ptc_monitor) {
-      // A heartbeat for long sub-steps (thousands of Newton iterations at 1500 disks): rank 0's clock decides, so
-      // the ranks agree on whether to print.
-      PetscLogDouble now;
-      PetscCall(PetscTime(&now));
-      int due = now - t_progress >= pp.progress_interval;
-      PetscCallMPI(MPI_Bcast(&due, 1, MPI_INT, 0, comm_));
-      if (due) {
-        t_progress = now;
-        PetscCall(PetscPrintf(comm_,
-                              "    ... P/E %.4g: pseudo-time step %d, %" PetscInt_FMT " Newton its, |F|_inf %.2e P<d>"
-                              " (level criterion %.0e), phi %.6f, %.0f s in this sub-step\n",
-                              pressure / pp.young, outer + 1, report->newton_its,
-                              force_residual / (std::max(pressure, 1e-300) * dmean), pp.level_force_rtol, phi,
-                              now - t_start));
-      }
-    }
+    if (!prm_.ptc_monitor)
+      PetscCall(progress_.Step(comm_, pressure, steps_before + outer + 1, report->newton_its, force_residual));
     report->force_residual = force_residual;
     const bool settled = !stale && p_.ActiveSet() == active_inner;
     if (settled && true_norm <= atol) break;  // exact equilibrium
@@ -845,8 +853,9 @@ PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift,
 PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
                           SolveReport *report) {
   PetscFunctionBeginUser;
+  Progress progress(problem);
   if (params.strategy == LevelStrategy::Anchored) {
-    AnchoredContinuation solver(problem, params);
+    AnchoredContinuation solver(problem, params, progress);
     PetscCall(solver.Solve(pressure, report));
     report->factorizations = static_cast<int>(report->newton_its);  // one LU per Newton iteration
     PetscFunctionReturn(0);
@@ -855,26 +864,23 @@ PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameter
     SolveReport first;
     bool left_open = false;
     {
-      MeritNewton attempt(problem, params);
+      MeritNewton attempt(problem, params, progress);
       PetscCall(attempt.Solve(pressure, &first, &left_open));
     }
     if (first.converged) {
       *report = first;
       PetscFunctionReturn(0);
     }
-    AnchoredContinuation solver(problem, params);
-    PetscCall(solver.Solve(pressure, report, left_open));
-    report->factorizations = static_cast<int>(report->newton_its) + first.factorizations;
-    report->newton_its += first.newton_its;
-    report->inner_solves += first.inner_solves;
-    report->candidate_refreshes += first.candidate_refreshes;
+    AnchoredContinuation solver(problem, params, progress);
+    PetscCall(solver.Solve(pressure, report, &first, left_open));
+    report->factorizations = static_cast<int>(report->newton_its - first.newton_its) + first.factorizations;
     PetscFunctionReturn(0);
   }
   if (params.strategy == LevelStrategy::Interior) {
     PetscCall(SolveLevelInterior(problem, params, pressure, report));
     PetscFunctionReturn(0);
   }
-  MeritNewton solver(problem, params);
+  MeritNewton solver(problem, params, progress);
   PetscCall(solver.Solve(pressure, report));
   PetscFunctionReturn(0);
 }

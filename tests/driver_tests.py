@@ -6,8 +6,9 @@
 Cases
   stability-unit-load      92 triangles, nu = 0.495, levels up to P/E = 1
   stability-incompressible nu = 0.4999 up to P/E = 0.5
-  jump                     0 -> 0.5 in one requested level vs the stepped run
-  forced-failure           -load_max_cuts 0 on a jump that needs cuts: clear error, non-zero exit
+  jump                     0 -> 0.5 in one requested level vs the stepped run (the default level
+                           solver, and anchored, whose jump at nu = 0.4999 needs cut sub-steps)
+  forced-failure           -load_max_cuts 0 on a jump that needs cuts (anchored): clear error, non-zero exit
   beyond-limit-point       nu = -0.9 past its limit load: clear error, non-zero exit, no endless creep
   bad-input --expect RE -- ARGS
                            ARGS must be refused: non-zero exit, RE in the output,
@@ -131,25 +132,31 @@ def case_stability_incompressible(args):
 
 
 def case_jump(args):
-    for nu, must_cut in ((0.495, False), (0.4999, True)):
-        stepped = driver_run(args, fresh_dir(os.path.join(args.workdir, f"stepped-{nu}")), [], f"stepped nu={nu}",
-                             DEFAULT_LEVELS, nu)
-        jump = driver_run(args, fresh_dir(os.path.join(args.workdir, f"jump-{nu}")), [], f"jump nu={nu}", [0.5], nu)
+    # The default level solver jumps; anchored needs cut sub-steps at nu = 0.4999 (the load controller's halving).
+    for nu, solver, must_cut in ((0.495, [], False), (0.4999, [], False), (0.4999, ["-level_solver", "anchored"], True)):
+        name = f"{nu}" + ("-" + solver[-1] if solver else "")
+        stepped = driver_run(args, fresh_dir(os.path.join(args.workdir, f"stepped-{name}")), solver,
+                             f"stepped nu={nu} {' '.join(solver)}", DEFAULT_LEVELS, nu)
+        jump = driver_run(args, fresh_dir(os.path.join(args.workdir, f"jump-{name}")), solver,
+                          f"jump nu={nu} {' '.join(solver)}", [0.5], nu)
         if not stepped or not jump:
             continue
         j = jump[0]
-        print(f"  info  nu={nu}: the single jump 0 -> 0.5 took {j['substeps']:.0f} sub-steps and {j['cuts']:.0f} cuts"
-              f" ({j['newton_its']:.0f} Newton iterations)")
+        print(f"  info  nu={nu} {' '.join(solver)}: the single jump 0 -> 0.5 took {j['substeps']:.0f} sub-steps and"
+              f" {j['cuts']:.0f} cuts ({j['newton_its']:.0f} Newton iterations)")
         if must_cut:
             check(j["substeps"] > 1 and j["cuts"] >= 1,
-                  f"nu={nu}: the jump needs sub-stepping (substeps {j['substeps']:.0f} > 1, cuts {j['cuts']:.0f} >= 1)")
+                  f"nu={nu} {' '.join(solver)}: the jump needs sub-stepping (substeps {j['substeps']:.0f} > 1,"
+                  f" cuts {j['cuts']:.0f} >= 1)")
         check(abs(j["phi"] - stepped[-1]["phi"]) <= 1e-6,
-              f"nu={nu}: phi after the jump {j['phi']:.12f} equals the stepped phi {stepped[-1]['phi']:.12f} to 1e-6")
+              f"nu={nu} {' '.join(solver)}: phi after the jump {j['phi']:.12f} equals the stepped phi"
+              f" {stepped[-1]['phi']:.12f} to 1e-6")
 
 
 def case_forced_failure(args):
     out = fresh_dir(os.path.join(args.workdir, "forced-failure"))
-    rc, log = run([args.driver, "-output_dir", out, "-pressures", "0.5", "-nu", "0.4999", "-load_max_cuts", "0"])
+    rc, log = run([args.driver, "-output_dir", out, "-pressures", "0.5", "-nu", "0.4999", "-load_max_cuts", "0",
+                   "-level_solver", "anchored"])
     check(rc != 0, f"exit code {rc} != 0")
     check(re.search(r"pressure level P = 0\.5 not reached", log) is not None, "message names the level not reached")
     check("-load_max_cuts" in log, "message suggests -load_max_cuts")

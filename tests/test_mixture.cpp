@@ -296,7 +296,8 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
   LoadControlParameters load;
   load.level.strategy = strategy;
   load.level.body_criterion = body_criterion ? PETSC_TRUE : PETSC_FALSE;
-  const bool per_body = strategy == LevelStrategy::Newton || body_criterion;
+  const bool merit_newton = strategy == LevelStrategy::Newton || strategy == LevelStrategy::Hybrid;
+  const bool per_body = merit_newton || body_criterion;
   double step = -1.0;
   int level = 0;
   for (double P : {1e-4, 1e-3}) {
@@ -316,7 +317,7 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
     // anchored accepts with exact contact rows (the SNES tolerance); newton's
     // per-body criterion holds them to 1e-4 P <d>, i.e. gaps of closed
     // contacts to 1e-4 P <d> / c_n (c_n = E = 1 here).
-    const double gap_tol = strategy == LevelStrategy::Newton ? 1e-4 * P * problem.MeanDiameter() : 0.0;
+    const double gap_tol = merit_newton ? 1e-4 * P * problem.MeanDiameter() : 0.0;
     int frictional = 0, sliding = 0;
     for (const ContactForce &f : problem.ContactForces()) {
       EXPECT_GE(f.gap, -1e-9 * problem.MeanDiameter() - gap_tol) << "penetration";
@@ -358,6 +359,11 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionNewton) {
   CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Newton);
 }
 
+// The same with the hybrid level solver (a newton attempt, then anchored).
+TEST(Mixture, RandomTwentyDiskMixtureWithFrictionHybrid) {
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Hybrid);
+}
+
 // The same with anchored's level criterion per node only (-level_body_criterion false).
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionPerNodeCriterion) {
   CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Anchored, false);
@@ -372,12 +378,13 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionPerNodeCriterion) {
 // pore, which closes (between P/E 0.01 and 0.02), and the rattler is pushed
 // to where the disks around it balance it. Asserted: the equilibrium it
 // reaches (Signorini, the virial identity, the rattler's net force, a load
-// carried by several contacts), the same with the three level solvers; not
+// carried by several contacts), the same with the four level solvers; not
 // how many iterations it takes.
 TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
-  double carried_by[3] = {0.0, 0.0, 0.0};
-  const char *const labels[] = {"newton", "anchored", "interior"};  // LevelStrategy order
-  for (LevelStrategy strategy : {LevelStrategy::Anchored, LevelStrategy::Newton, LevelStrategy::Interior}) {
+  double carried_by[4] = {0.0, 0.0, 0.0, 0.0};
+  const char *const labels[] = {"newton", "anchored", "interior", "hybrid"};  // LevelStrategy order
+  for (LevelStrategy strategy :
+       {LevelStrategy::Anchored, LevelStrategy::Newton, LevelStrategy::Interior, LevelStrategy::Hybrid}) {
     ProblemParameters p;
     p.deformable_contact = DeformableContact::Mortar;
     p.constrain_rotation = PETSC_TRUE;
@@ -425,6 +432,53 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
   }
   EXPECT_NEAR(carried_by[0], carried_by[1], 1e-6 * carried_by[1]) << "newton and anchored reach the same equilibrium";
   EXPECT_NEAR(carried_by[2], carried_by[1], 1e-6 * carried_by[1]) << "interior and anchored reach the same equilibrium";
+  EXPECT_NEAR(carried_by[3], carried_by[1], 1e-6 * carried_by[1]) << "hybrid and anchored reach the same equilibrium";
+}
+
+// The overlap limit of a predicted state (BeginLoadStep). Four frictionless
+// deformable disks (mortar contact) in a square box, converged at P/E =
+// 0.1: the tangent prediction for 0.2 pushes the boundary nodes about to
+// join the growing contact patches into the neighbours (an overlap of a few
+// 1e-2 <d>). Admitted up to 0.1 <d> (hybrid's newton attempt) it is taken,
+// and its box is closer to the converged box at 0.2 than the last state's;
+// with the limit of 1e-3 <d> it is halved until given up, and the load step
+// starts from the last state.
+TEST(Mixture, PredictionOverlapLimit) {
+  auto problem = Lattice(2, 0.0, [](int, int) { return true; }, true, 40);
+  ASSERT_TRUE(problem);
+  LoadControlParameters load;
+  double step = -1.0;
+  LevelReport rep;
+  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.1, &step, &rep));
+  const std::vector<double> last(problem->Walls(), problem->Walls() + 4);
+  const auto predicted = [&](double limit, double *overlap) {
+    SolveReport undone;
+    std::vector<double> w;
+    if (problem->BeginLoadStep(0.2, LoadPredictor::Tangent, limit)) return w;
+    w.assign(problem->Walls(), problem->Walls() + 4);
+    *overlap = problem->Summary().max_penetration / problem->MeanDiameter();
+    if (problem->EndLoadStep(false, &undone)) w.clear();
+    return w;
+  };
+  double loose_overlap = 0.0, tight_overlap = 0.0;
+  const std::vector<double> loose = predicted(0.1, &loose_overlap);
+  const std::vector<double> tight = predicted(CompactionProblem::kPredictionOverlap, &tight_overlap);
+  ASSERT_EQ(loose.size(), 4u);
+  ASSERT_EQ(tight.size(), 4u);
+  for (int k = 0; k < 4; ++k) EXPECT_EQ(problem->Walls()[k], last[k]) << "a failed load step restores the walls";
+  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.2, &step, &rep));
+  const auto distance = [&](const std::vector<double> &w) {
+    double e = 0.0;
+    for (int k = 0; k < 4; ++k) e = std::max(e, std::abs(w[k] - problem->Walls()[k]));
+    return e;
+  };
+  std::printf("  predicted overlap %.3e <d> (limit 0.1), %.3e <d> (limit 1e-3); box error %.3e, %.3e, last state %.3e\n",
+              loose_overlap, tight_overlap, distance(loose), distance(tight), distance(last));
+  EXPECT_GT(loose_overlap, CompactionProblem::kPredictionOverlap) << "the prediction overlaps beyond the tight limit";
+  EXPECT_LT(loose_overlap, 0.1);
+  EXPECT_LT(distance(loose), 0.5 * distance(last)) << "the admitted prediction is closer to the equilibrium";
+  EXPECT_LT(tight_overlap, CompactionProblem::kPredictionOverlap);
+  EXPECT_EQ(distance(tight), distance(last)) << "under the tight limit the prediction is given up";
 }
 
 // A 12-disk all-deformable packing (40-triangle disks) with two-pass

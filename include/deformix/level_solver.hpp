@@ -84,7 +84,7 @@ namespace deformix {
 enum class LevelStrategy : int { Newton = 0, Anchored = 1, Interior = 2, Hybrid = 3 };
 
 struct LevelSolverParameters {
-  LevelStrategy strategy = LevelStrategy::Anchored;
+  LevelStrategy strategy = LevelStrategy::Hybrid;
   PetscInt max_its = 200;     // linearizations per load step before it counts as failed
   PetscInt attempt_its = 30;  // hybrid: linearizations of the newton attempt
   double initial_move = 0.1;  // trust radius m at the start of a load step, in <d>
