@@ -184,7 +184,8 @@ def plot(rows, runs, strategies, path, title):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", nargs="+", default=["default"])
-    ap.add_argument("--strategies", nargs="+", default=["anchored", "newton"])
+    ap.add_argument("--strategies", nargs="+", default=["anchored", "hybrid"])
+    ap.add_argument("--only", nargs="+", default=[], help="run labels to keep (e.g. n400_k0.5_mu0.2); default: all")
     ap.add_argument("--pressures", default="", help="P/E list of the 50-, 400- and 1500-disk runs")
     ap.add_argument("--ranks", type=int, default=2, help="MPI ranks of paper1500")
     ap.add_argument("--jobs", type=int, default=1, help="simulations at a time")
@@ -199,6 +200,11 @@ def main():
     if a.baseline and "baseline" not in a.strategies:
         a.strategies.insert(0, "baseline")
     runs = scene_runs(a)
+    if a.only:
+        unknown = set(a.only) - {label for _, label, _, _ in runs}
+        if unknown:
+            sys.exit(f"--only {' '.join(sorted(unknown))}: not a run of --scenes {' '.join(a.scenes)}")
+        runs = [r for r in runs if r[1] in a.only]
     rows = []
     jobs = [(scene, label, ranks, opts, s) for scene, label, ranks, opts in runs for s in a.strategies]
     with cf.ThreadPoolExecutor(max_workers=a.jobs) as pool:
