@@ -324,16 +324,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   CompactionProblem problem(comm);
   PetscCall(problem.SetParameters(params));
   const int n_deformable = problem.AddPacking(packing, unit_mesh);
-  if (restarting) {
-    PetscCall(problem.RestoreSnapshot(restart.state));
-    // The operator of the restored state, which an uninterrupted run holds
-    // from the level before: the next level's first Newton matrix (the
-    // tangent predictor's) then costs no symbolic analysis in either run.
-    Vec z, F;
-    Mat J;
-    KSP ksp;
-    PetscCall(problem.Layout(&z, &F, &J, &ksp));
-  }
+  if (restarting) PetscCall(problem.RestoreSnapshot(restart.state));
   PetscCall(WritePackingCsv(comm, opts.output_dir + "/packing.csv", packing));
   PetscCall(PetscPrintf(comm,
                         "compact: %d particles (%d deformable, %d triangles each; %d rigid), kappa = %g, friction = %g,"

@@ -429,6 +429,13 @@ PetscErrorCode CompactionProblem::RestoreSnapshot(const Snapshot &s) {
   have_previous_ = s.have_previous;
   pressure_ = s.pressure;
   u_start_ = u_;
+  // The operator of the restored state, which an uninterrupted run holds from
+  // the level before: the next load step's first Newton matrix (the tangent
+  // predictor's) then costs no new layout in either run.
+  Vec z, F;
+  Mat J;
+  KSP ksp;
+  PetscCall(Layout(&z, &F, &J, &ksp));
   PetscFunctionReturn(0);
 }
 
@@ -1234,8 +1241,9 @@ bool CompactionProblem::PredictionAdmissible(double overlap_limit) const {
                           predicted.max_penetration < overlap_limit * mean_diameter_ &&
                           DetectCandidates(-overlap_limit).empty();
   // -info: why a prediction was halved (on deformable packings beyond P/E ~
-  // 0.1 the growing contact patches make every prediction overlap by more;
-  // admitting such overlaps was measured slower, docs/level-solver.md).
+  // 0.1 the growing contact patches make every prediction overlap by more
+  // than 1e-3 <d>; admitting such overlaps is slower for anchored, faster
+  // for hybrid's newton attempt, docs/level-solver.md).
   PetscInfo(nullptr, "predicted state %s: smallest cell area ratio %g, deepest overlap %g <d>\n",
             admissible ? "taken" : "rejected", predicted.min_cell_area_ratio, predicted.max_penetration / mean_diameter_);
   return admissible;

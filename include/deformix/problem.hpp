@@ -372,7 +372,8 @@ class CompactionProblem {
   Snapshot TakeSnapshot() const;
   // Fails (PETSC_ERR_FILE_UNEXPECTED) when the snapshot does not fit the
   // bodies added (unknown counts, candidates naming bodies or points that do
-  // not exist), i.e. was taken from another scene.
+  // not exist), i.e. was taken from another scene. Builds the restored
+  // state's layout (collective).
   PetscErrorCode RestoreSnapshot(const Snapshot &s);
 
   StateSummary Summary() const;
