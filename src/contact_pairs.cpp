@@ -174,6 +174,7 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
         if (lc.dofs[a] >= 0) slope += std::abs(k.dgap[a]);
       gap_bound_[2 * c] = k.gap;
       gap_bound_[2 * c + 1] = slope;
+      if (lt_dof >= 0) slip_now_[c] = k.slip;
     }
     if (F) {
       for (int a = 0; a < nd; ++a)

@@ -13,6 +13,8 @@ namespace deformix {
 PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
   PetscInt choice = static_cast<PetscInt>(strategy);
   const char *const names[] = {"newton", "anchored", "interior", "hybrid"};  // LevelStrategy order
+  PetscInt merit_choice = static_cast<PetscInt>(merit);
+  const char *const merits[] = {"residual", "energy"};  // LevelMerit order
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Level solver", "deformix");
   PetscCall(PetscOptionsEList("-level_solver",
@@ -24,6 +26,12 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                               "(frictionless levels only: primal-dual interior point on the enthalpy with a barrier on "
                               "the gaps, then an exact active-set polish)",
                               "", names, 4, names[choice], &choice, nullptr));
+  PetscCall(PetscOptionsEList("-level_merit",
+                              "newton and hybrid's attempt: what accepts a step: residual (|G| of the proximal "
+                              "subproblem decreases) or energy (|G| decreases, or the energy decreases: the enthalpy "
+                              "plus an exact l1 penalty on penetration and Tresca friction with the normal forces "
+                              "lagged at the iterate; the shift then grows until the step has positive curvature)",
+                              "", merits, 2, merits[merit_choice], &merit_choice, nullptr));
   PetscCall(PetscOptionsInt("-level_attempt_its", "hybrid: linearizations of the newton attempt before anchored takes over", "",
                             attempt_its, &attempt_its, nullptr));
   PetscCall(PetscOptionsInt("-level_max_its", "newton: linearizations per load step before the step is cut", "", max_its,
@@ -56,6 +64,7 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "", newton_monitor_contacts, &newton_monitor_contacts, nullptr));
   PetscOptionsEnd();
   strategy = static_cast<LevelStrategy>(choice);
+  merit = static_cast<LevelMerit>(merit_choice);
   PetscCheck(attempt_its >= 1, comm, PETSC_ERR_USER_INPUT, "-level_attempt_its %" PetscInt_FMT " must be >= 1",
              attempt_its);
   PetscCheck(max_its >= 1, comm, PETSC_ERR_USER_INPUT, "-level_max_its %" PetscInt_FMT " must be >= 1", max_its);
@@ -141,6 +150,7 @@ class MeritNewton {
   Vec za_ = nullptr, G_ = nullptr, Gt_ = nullptr;  // anchor, proximal residual at the iterate and at a trial point
   Vec d_ = nullptr, s_ = nullptr, zt_ = nullptr, Ft_ = nullptr, floor_ = nullptr, weight_ = nullptr, sqrt_weight_ = nullptr,
       work_ = nullptr;
+  Vec body_mask_ = nullptr;  // 1 on the body and wall rows (the shifted ones), 0 elsewhere
   double rho_in_matrix_ = 0.0;
   int layouts_ = -1;
   MPI_Comm comm_ = MPI_COMM_NULL;
@@ -148,7 +158,7 @@ class MeritNewton {
 
 PetscErrorCode MeritNewton::Destroy() {
   PetscFunctionBeginUser;
-  PetscCall(DestroyAll({&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_}));
+  PetscCall(DestroyAll({&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_, &body_mask_}));
   PetscFunctionReturn(0);
 }
 
@@ -159,8 +169,19 @@ PetscErrorCode MeritNewton::Attach() {
   layouts_ = p_.LayoutsCreated();
   PetscCall(Destroy());
   PetscCall(PetscObjectGetComm((PetscObject)z_, &comm_));
-  PetscCall(DuplicateAll(z_, {&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_}));
+  PetscCall(DuplicateAll(z_, {&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_, &body_mask_}));
   PetscCall(p_.ShiftDiagonals(floor_, weight_));
+  {
+    PetscScalar *m;
+    const PetscScalar *w;
+    PetscInt n;
+    PetscCall(VecGetLocalSize(weight_, &n));
+    PetscCall(VecGetArrayRead(weight_, &w));
+    PetscCall(VecGetArray(body_mask_, &m));
+    for (PetscInt i = 0; i < n; ++i) m[i] = w[i] > 0.0 ? 1.0 : 0.0;
+    PetscCall(VecRestoreArray(body_mask_, &m));
+    PetscCall(VecRestoreArrayRead(weight_, &w));
+  }
   PetscCall(VecCopy(weight_, sqrt_weight_));
   PetscCall(VecSqrtAbs(sqrt_weight_));
   PetscFunctionReturn(0);
@@ -208,12 +229,32 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
   };
   double move = prm_.initial_move;  // trust radius m, in <d>
   double rho = 0.0;
-  // A new anchor at the iterate: G = F there, rho from its largest force.
+  const bool energy = prm_.merit == LevelMerit::Energy;
+  // Energy merit psi = H + nu x penetration + dissipation (CompactionProblem::
+  // ContactPenalty): its parts at the last residual evaluation, and at the
+  // iterate (with the Tresca bounds lagged there); nu is chosen per step.
+  struct EnergyParts {
+    double enthalpy = 0.0, penetration = 0.0, dissipation = 0.0;
+  } at_z, trial_parts;
+  double nu = 0.0;
+  const auto energy_parts = [&](EnergyParts *e) -> PetscErrorCode {
+    PetscFunctionBeginUser;
+    PetscCall(p_.ContactPenalty(&e->penetration, &e->dissipation));
+    e->enthalpy = p_.Merit();
+    PetscFunctionReturn(0);
+  };
+  const auto psi_of = [&](const EnergyParts &e) { return e.enthalpy + nu * e.penetration + e.dissipation; };
+  // A new anchor at the iterate (the last residual evaluation): G = F there,
+  // rho from its largest force, the energy merit's Tresca bounds lagged there.
   const auto anchor = [&]() -> PetscErrorCode {
     PetscFunctionBeginUser;
     PetscCall(VecCopy(z_, za_));
     PetscCall(VecCopy(F_, G_));
     rho = force / (move * dmean);
+    if (energy) {
+      PetscCall(p_.LagContactWeights());
+      PetscCall(energy_parts(&at_z));
+    }
     PetscFunctionReturn(0);
   };
   // G(z') = F(z') + rho D (z' - z_a) at a point with residual F.
@@ -303,7 +344,26 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         PetscCall(KSPGetConvergedReason(ksp_, &kreason));
         ok = kreason > 0;
       }
-      if (!ok) {
+      double curvature = INFINITY;
+      if (ok && energy) {
+        // The energy merit needs a descent direction: with the contact rows
+        // of d holding, the energy's slope along d is -d_x^T (K + rho D) d_x
+        // (d_x its body and wall part, K the Hessian of the Lagrangian), so
+        // the shift has to make that curvature positive: on rolling and
+        // rearranging configurations K is indefinite. Tested on the step
+        // itself (one product with the assembled matrix, which MUMPS's LU
+        // cannot give as an inertia), as the interior solver does.
+        PetscCall(VecPointwiseMult(work_, d_, body_mask_));
+        PetscCall(MatMult(J_, work_, Ft_));
+        PetscCall(VecDot(work_, Ft_, &curvature));
+        ok = curvature > 0.0;
+        if (!ok && prm_.monitor)
+          PetscCall(PetscPrintf(comm_, "    newton %3" PetscInt_FMT "  curvature %.2e <= 0 at rho %.1e: a larger shift\n",
+                                report->newton_its, curvature, rho));
+      }
+      if (!ok && std::isfinite(curvature)) {
+        // negative curvature: a larger shift, below
+      } else if (!ok) {
         // A failed factorization: MUMPS out of workspace gets a larger one
         // (a new layout); anything else (a singular matrix) a larger shift.
         if (out_of_memory && p_.GrowFactorWorkspace()) {
@@ -319,7 +379,8 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         if (prm_.monitor)
           PetscCall(PetscPrintf(comm_, "    newton %3" PetscInt_FMT "  factorization failed (%s) at rho %.1e\n",
                                 report->newton_its, PCFailedReasons[pc_reason], rho));
-      } else {
+      }
+      if (ok) {
         PetscCall(VecScale(d_, -1.0));  // (J + rho D) d = -G
         // Step fraction: open contacts not driven deep into penetration, and
         // no body moving (or turning, times its radius) more than m <d> in
@@ -330,6 +391,15 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         PetscCall(VecPointwiseMult(work_, d_, sqrt_weight_));
         PetscCall(VecNorm(work_, NORM_INFINITY, &full_move));
         if (full_move > move * dmean) alpha0 = std::min(alpha0, move * dmean / full_move);
+        if (energy) {
+          // The exact penalty needs nu above every normal force, those of
+          // the step's end point included (the l1 merit of SQP).
+          double largest_now, largest_next;
+          PetscCall(p_.LargestNormalMultiplier(z_, &largest_now));
+          PetscCall(VecWAXPY(work_, 1.0, z_, d_));
+          PetscCall(p_.LargestNormalMultiplier(work_, &largest_next));
+          nu = 2.0 * std::max(largest_now, largest_next) + pressure * dmean;
+        }
         // Backtracking (Armijo on |G| along its Newton direction d) before a
         // larger shift, which costs a factorization.
         for (int bt = 0; bt < kBacktracks && !accepted; ++bt) {
@@ -341,7 +411,23 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
           PetscCall(Evaluate(zt_, Ft_, &trial_norm, &trial_force, &trial_inverted));
           PetscCall(proximal(zt_, Ft_, Gt_, &trial_gnorm));
           if (!std::isfinite(trial_norm)) trial_gnorm = INFINITY;
-          accepted = trial_gnorm <= (1.0 - 1e-4 * alpha) * gnorm;
+          const bool residual_decreased = trial_gnorm <= (1.0 - 1e-4 * alpha) * gnorm;
+          double trial_psi = 0.0, psi = 0.0;
+          if (energy) {
+            // Either merit may accept: the energy where it decreases beyond
+            // round-off (its sum over elements carries about 1e-16 of each
+            // term), or |G|. The energy accepts the steps of a rearrangement
+            // that switch contacts (|G| jumps there), |G| those that cross a
+            // kink of the energy (an open contact closing, a contact slipping
+            // against its lagged Tresca bound), which Newton's next
+            // linearization resolves.
+            PetscCall(energy_parts(&trial_parts));
+            psi = psi_of(at_z), trial_psi = psi_of(trial_parts);
+            const double change = trial_psi - psi, band = 1e-13 * std::abs(psi);
+            accepted = std::isfinite(trial_gnorm) && std::isfinite(trial_psi) && (change < -band || residual_decreased);
+          } else {
+            accepted = residual_decreased;
+          }
           double step;
           PetscCall(VecPointwiseMult(work_, s_, sqrt_weight_));
           PetscCall(VecNorm(work_, NORM_INFINITY, &step));
@@ -353,10 +439,15 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
             PetscCall(PetscPrintf(comm_,
                                   "    newton %3" PetscInt_FMT "  |F| %.3e  |G| %.3e -> %.3e (trial |F| %.3e)  |F|_inf %.2e  "
                                   "m %.1e rho %.1e  alpha %.3f |s| %.1e  %s  closed %d sliding %d  "
-                                  "(trial rows: body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)\n",
+                                  "(trial rows: body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)",
                                   report->newton_its, fnorm, gnorm, trial_gnorm, trial_norm, force, move, rho, alpha, step,
                                   accepted ? "accepted" : "rejected", closed, sliding, blocks[0], blocks[1], blocks[2],
                                   blocks[3], blocks[4]));
+            if (energy)
+              PetscCall(PetscPrintf(comm_, "  energy change %+.3e of %.6e (enthalpy %+.3e, nu %.2e x penetration %+.3e, dissipation %+.3e)",
+                                    trial_psi - psi, psi, trial_parts.enthalpy - at_z.enthalpy, nu,
+                                    trial_parts.penetration - at_z.penetration, trial_parts.dissipation - at_z.dissipation));
+            PetscCall(PetscPrintf(comm_, "\n"));
           }
           if (accepted) {
             last_step = step;

@@ -529,6 +529,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
     active->assign(candidates_.size(), kOpen);
     switch_margin_.assign(2 * candidates_.size(), 0.0);
     gap_bound_.assign(2 * candidates_.size(), 0.0);
+    slip_now_.assign(candidates_.size(), 0.0);
     barrier_row_.assign(2 * candidates_.size(), 0.0);
   }
   // Each rank assembles what it owns: the elements of its deformable disks,
@@ -1164,6 +1165,43 @@ PetscErrorCode CompactionProblem::ResidualBlocks(Vec F, double norm[5]) const {
   PetscCall(VecRestoreArrayRead(F, &ra));
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, norm, 5, MPI_DOUBLE, MPI_SUM, comm_));
   for (int k = 0; k < 5; ++k) norm[k] = std::sqrt(norm[k]);
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::LagContactWeights() {
+  PetscFunctionBeginUser;
+  const double mu_f = friction_on_ ? params_.friction : 0.0;
+  tresca_bound_.assign(candidates_.size(), 0.0);
+  for (size_t c = 0; c < candidates_.size() && c < lambda_.size(); ++c)
+    if (tangential_index_[c] >= 0) tresca_bound_[c] = mu_f * std::max(lambda_[c], 0.0);
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::ContactPenalty(double *penetration, double *dissipation) const {
+  PetscFunctionBeginUser;
+  PetscCheck(tresca_bound_.size() == candidates_.size() && gap_bound_.size() == 2 * candidates_.size(), comm_,
+             PETSC_ERR_ORDER, "ContactPenalty needs LagContactWeights and a residual evaluation with the current candidates");
+  double local[2] = {0.0, 0.0};
+  for (size_t c = 0; c < candidates_.size(); ++c) {
+    if (CandidateOwner(candidates_[c]) != rank_) continue;
+    local[0] += std::max(0.0, -gap_bound_[2 * c]);
+    local[1] += tresca_bound_[c] * std::abs(slip_now_[c]);
+  }
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, local, 2, MPI_DOUBLE, MPI_SUM, comm_));
+  *penetration = local[0], *dissipation = local[1];
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::LargestNormalMultiplier(Vec z, double *largest) const {
+  const PetscScalar *za;
+  PetscFunctionBeginUser;
+  const PetscInt lo = MultiplierOffset(), hi = lo + static_cast<PetscInt>(candidates_.size());
+  double m = 0.0;
+  PetscCall(VecGetArrayRead(z, &za));
+  for (PetscInt i = own_lo_; i < own_hi_; ++i)
+    if (natural_of_[i] >= lo && natural_of_[i] < hi) m = std::max(m, PetscRealPart(za[i - own_lo_]));
+  PetscCall(VecRestoreArrayRead(z, &za));
+  PetscCallMPI(MPI_Allreduce(&m, largest, 1, MPI_DOUBLE, MPI_MAX, comm_));
   PetscFunctionReturn(0);
 }
 

@@ -82,11 +82,15 @@
 namespace deformix {
 
 enum class LevelStrategy : int { Newton = 0, Anchored = 1, Interior = 2, Hybrid = 3 };
+// What tests a step of newton (and of hybrid's attempt): the residual of the
+// proximal subproblem, or the energy (level_solver.hpp, newton).
+enum class LevelMerit : int { Residual = 0, Energy = 1 };
 
 struct LevelSolverParameters {
   LevelStrategy strategy = LevelStrategy::Hybrid;
   PetscInt max_its = 200;     // linearizations per load step before it counts as failed
   PetscInt attempt_its = 30;  // hybrid: linearizations of the newton attempt
+  LevelMerit merit = LevelMerit::Residual;  // newton (and hybrid's attempt): -level_merit
   double initial_move = 0.1;  // trust radius m at the start of a load step, in <d>
   PetscBool monitor = PETSC_FALSE;  // -level_monitor: one line per Newton iteration
   SNESLineSearchType line_search = SNESLINESEARCHBT;  // anchored: the SNES line search (-snes_linesearch_type overrides)

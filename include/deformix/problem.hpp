@@ -291,6 +291,20 @@ class CompactionProblem {
   // outside the barrier's domain or an element inverted. Frictionless
   // equilibria are its constrained stationary points (the rows of F).
   double Merit() const { return merit_; }
+  // The contact part of the energy merit of the newton strategy
+  // (level_solver.hpp, -level_merit energy). LagContactWeights fixes, from
+  // the current state's multipliers, the Tresca bound mu lambda_n,c of every
+  // frictional candidate (friction with lagged normal forces); then, at the
+  // last residual evaluation, ContactPenalty gives the penetration
+  // sum_c max(0, -g_c) and the dissipation sum_c mu lambda_n,c |s_c|, s_c the
+  // incremental slip of the load step. Merit() + nu x penetration +
+  // dissipation is the incremental potential of the frictional problem with
+  // the normal forces lagged, its penetration penalized exactly for nu above
+  // every normal force. Collective; the bounds are lost with the candidates.
+  PetscErrorCode LagContactWeights();
+  PetscErrorCode ContactPenalty(double *penetration, double *dissipation) const;
+  // Largest normal multiplier of z (collective).
+  PetscErrorCode LargestNormalMultiplier(Vec z, double *largest) const;
   // At the last residual evaluation, on the normal-multiplier rows (0 on the
   // others): g_c + eps, the stiffness k_c and the barrier force mu psi of
   // SetBarrier; rows: 1 on the normal-multiplier rows.
@@ -517,6 +531,8 @@ class CompactionProblem {
   std::vector<char> active_now_;
   std::vector<double> switch_margin_;  // per candidate: |lambda_n - c_n g| and ||trial| - mu a| (own contacts; see ChangedStateMargin)
   std::vector<double> gap_bound_;      // per candidate, at the last residual: gap and sum_a |dgap_a| (own contacts; see ContactStepFraction)
+  std::vector<double> slip_now_;       // per candidate, at the last residual: incremental slip (own frictional contacts; ContactPenalty)
+  std::vector<double> tresca_bound_;   // per candidate: mu lambda_n lagged by LagContactWeights
   bool inverted_ = false;
   double rho_anchor_ = 0.0;         // pseudo-transient weight (0: plain Newton)
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
