@@ -276,7 +276,8 @@ TEST(CoulombLaw, SwitchMarginsOfChangedStates) {
 // in a random 20-disk mixture (kappa 0.5, friction 0.2), two levels, with
 // the deformable pairs' contact law `law`.
 void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
-                                  LevelStrategy strategy = LevelStrategy::Anchored, bool body_criterion = true) {
+                                  LevelStrategy strategy = LevelStrategy::Anchored, bool body_criterion = true,
+                                  LevelMerit merit = LevelMerit::Residual) {
   DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
   assign_deformable(packing, 0.5, 1);
   ProblemParameters p;
@@ -295,6 +296,7 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
   ASSERT_GT(n_rigid, 0);
   LoadControlParameters load;
   load.level.strategy = strategy;
+  load.level.merit = merit;
   load.level.body_criterion = body_criterion ? PETSC_TRUE : PETSC_FALSE;
   const bool merit_newton = strategy == LevelStrategy::Newton || strategy == LevelStrategy::Hybrid;
   const bool per_body = merit_newton || body_criterion;
@@ -364,6 +366,11 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionHybrid) {
   CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Hybrid);
 }
 
+// The same with hybrid's attempt accepting steps by the energy merit too.
+TEST(Mixture, RandomTwentyDiskMixtureWithFrictionHybridEnergyMerit) {
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Hybrid, true, LevelMerit::Energy);
+}
+
 // The same with anchored's level criterion per node only (-level_body_criterion false).
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionPerNodeCriterion) {
   CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Anchored, false);
@@ -378,13 +385,13 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionPerNodeCriterion) {
 // pore, which closes (between P/E 0.01 and 0.02), and the rattler is pushed
 // to where the disks around it balance it. Asserted: the equilibrium it
 // reaches (Signorini, the virial identity, the rattler's net force, a load
-// carried by several contacts), the same with the four level solvers; not
-// how many iterations it takes.
+// carried by several contacts), the same with the four level solvers and
+// with newton's energy merit; not how many iterations it takes.
 TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
-  double carried_by[4] = {0.0, 0.0, 0.0, 0.0};
-  const char *const labels[] = {"newton", "anchored", "interior", "hybrid"};  // LevelStrategy order
-  for (LevelStrategy strategy :
-       {LevelStrategy::Anchored, LevelStrategy::Newton, LevelStrategy::Interior, LevelStrategy::Hybrid}) {
+  double carried_by[5] = {0.0, 0.0, 0.0, 0.0, 0.0};
+  const char *const labels[] = {"newton", "anchored", "interior", "hybrid", "newton, energy merit"};  // LevelStrategy order, then newton's energy merit
+  for (int variant : {1, 0, 2, 3, 4}) {
+    const LevelStrategy strategy = variant == 4 ? LevelStrategy::Newton : static_cast<LevelStrategy>(variant);
     ProblemParameters p;
     p.deformable_contact = DeformableContact::Mortar;
     p.constrain_rotation = PETSC_TRUE;
@@ -400,8 +407,9 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
     problem.SetWalls(w);
     LoadControlParameters load;
     load.level.strategy = strategy;
+    if (variant == 4) load.level.merit = LevelMerit::Energy;
     double step = -1.0;
-    const char *label = labels[static_cast<int>(strategy)];
+    const char *label = labels[variant];
     for (double P : {1e-3, 0.05}) {
       LevelReport rep;
       ASSERT_PETSC(AdvanceToPressure(problem, load, P, &step, &rep));
@@ -425,7 +433,7 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
         EXPECT_GE(touching, 2) << label;
         EXPECT_GT(carried, 0.1 * P) << label;
         EXPECT_LE(std::hypot(net[0], net[1]), 1e-9 * carried) << label << ": net force on the rattler";
-        carried_by[static_cast<int>(strategy)] = carried;
+        carried_by[variant] = carried;
       }
       CheckSignoriniCoulomb(problem, P, label);
     }
@@ -433,6 +441,7 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
   EXPECT_NEAR(carried_by[0], carried_by[1], 1e-6 * carried_by[1]) << "newton and anchored reach the same equilibrium";
   EXPECT_NEAR(carried_by[2], carried_by[1], 1e-6 * carried_by[1]) << "interior and anchored reach the same equilibrium";
   EXPECT_NEAR(carried_by[3], carried_by[1], 1e-6 * carried_by[1]) << "hybrid and anchored reach the same equilibrium";
+  EXPECT_NEAR(carried_by[4], carried_by[1], 1e-6 * carried_by[1]) << "newton's energy merit and anchored reach the same equilibrium";
 }
 
 // The overlap limit of a predicted state (BeginLoadStep). Four frictionless
