@@ -381,6 +381,99 @@ TEST(ContactProblem, MeritIsThePotentialOfTheBarrierResidual) {
   for (Vec *v : {&zv, &Fv, &gap, &stiff, &target, &rows}) VecDestroy(v);
 }
 
+// The contact part of newton's energy merit (ContactPenalty): a rigid disk
+// of diameter 1 in a box of side 1, moved by delta towards the right wall,
+// overlaps it by exactly delta and leaves the left wall by delta; the walls
+// are frictionless, so no dissipation. Next test: a rigid pair with
+// friction, where the dissipation is mu lambda_n |s| with lambda_n lagged by
+// LagContactWeights at the iterate.
+TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
+  ProblemParameters params;
+  params.friction = 0.2;
+  CompactionProblem problem(PETSC_COMM_WORLD);
+  ASSERT_PETSC(problem.SetParameters(params));
+  problem.AddRigidBody(0.0, 0.0, kRadius);
+  const double walls[4] = {-kRadius, kRadius, -kRadius, kRadius};
+  problem.SetWalls(walls);
+  ASSERT_PETSC(problem.RefreshCandidates());
+  Vec z, F;
+  Mat J;
+  KSP ksp;
+  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
+  PetscInt n, x_dof = -1;
+  ASSERT_PETSC(VecGetSize(z, &n));
+  for (PetscInt i = 0; i < n; ++i)
+    if (problem.DescribeUnknown(problem.NaturalIndex(i)) == "rigid particle 0 dof 0") x_dof = i;
+  ASSERT_GE(x_dof, 0);
+  ASSERT_EQ(problem.Sizes().normal, 4) << "the four wall contacts";
+  Vec zt;
+  ASSERT_PETSC(VecDuplicate(z, &zt));
+  for (double delta : {1e-3, 2e-2}) {
+    ASSERT_PETSC(VecCopy(z, zt));
+    ASSERT_PETSC(VecSetValue(zt, x_dof, delta, ADD_VALUES));
+    ASSERT_PETSC(VecAssemblyBegin(zt));
+    ASSERT_PETSC(VecAssemblyEnd(zt));
+    ASSERT_PETSC(problem.Residual(zt, F));
+    ASSERT_PETSC(problem.LagContactWeights());
+    double penetration = -1.0, dissipation = -1.0;
+    ASSERT_PETSC(problem.ContactPenalty(&penetration, &dissipation));
+    EXPECT_NEAR(penetration, delta, 1e-12) << "delta " << delta;
+    EXPECT_EQ(dissipation, 0.0) << "frictionless walls";
+  }
+  ASSERT_PETSC(VecDestroy(&zt));
+}
+
+TEST(ContactProblem, EnergyMeritDissipationIsTrescaWithLaggedNormalForce) {
+  ProblemParameters params;
+  params.friction = 0.2;
+  CompactionProblem problem(PETSC_COMM_WORLD);
+  ASSERT_PETSC(problem.SetParameters(params));
+  problem.AddRigidBody(0.0, 0.0, kRadius);
+  problem.AddRigidBody(2 * kRadius, 0.0, kRadius);
+  const double walls[4] = {-kRadius - 1.0, 3 * kRadius + 1.0, -kRadius - 1.0, kRadius + 1.0};
+  problem.SetWalls(walls);
+  ASSERT_PETSC(problem.RefreshCandidates());
+  ASSERT_PETSC(problem.BeginLoadStep(1e-3));
+  Vec z, F;
+  Mat J;
+  KSP ksp;
+  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
+  ASSERT_EQ(problem.Sizes().normal, 1) << "the pair, no wall within reach";
+  PetscInt n, y_dof = -1, lambda_dof = -1;
+  ASSERT_PETSC(VecGetSize(z, &n));
+  for (PetscInt i = 0; i < n; ++i) {
+    const std::string what = problem.DescribeUnknown(problem.NaturalIndex(i));
+    if (what == "rigid particle 1 dof 1") y_dof = i;
+    if (what == "lambda_n") lambda_dof = i;
+  }
+  ASSERT_GE(y_dof, 0);
+  ASSERT_GE(lambda_dof, 0);
+  const double lambda_n = 0.3;
+  ASSERT_PETSC(VecSetValue(z, lambda_dof, lambda_n, INSERT_VALUES));
+  ASSERT_PETSC(VecAssemblyBegin(z));
+  ASSERT_PETSC(VecAssemblyEnd(z));
+  ASSERT_PETSC(problem.AdoptState(z));
+  ASSERT_PETSC(problem.LagContactWeights());
+  Vec zt;
+  ASSERT_PETSC(VecDuplicate(z, &zt));
+  for (double s : {1e-4, -3e-3}) {
+    ASSERT_PETSC(VecCopy(z, zt));
+    ASSERT_PETSC(VecSetValue(zt, lambda_dof, 0.0, INSERT_VALUES));  // the trial's multiplier does not enter
+    ASSERT_PETSC(VecSetValue(zt, y_dof, s, ADD_VALUES));
+    ASSERT_PETSC(VecAssemblyBegin(zt));
+    ASSERT_PETSC(VecAssemblyEnd(zt));
+    ASSERT_PETSC(problem.Residual(zt, F));
+    double penetration = -1.0, dissipation = -1.0;
+    ASSERT_PETSC(problem.ContactPenalty(&penetration, &dissipation));
+    // Sliding by s along the contact plane: |slip| = |s| to first order, the
+    // gap opens by s^2 / (2 d).
+    EXPECT_NEAR(dissipation, 0.2 * lambda_n * std::abs(s), 1e-3 * 0.2 * lambda_n * std::abs(s)) << "slide " << s;
+    EXPECT_EQ(penetration, 0.0);
+  }
+  ASSERT_PETSC(VecDestroy(&zt));
+  ASSERT_PETSC(problem.EndLoadStep(false, nullptr));
+}
+
 // 1b. The proximal term is rho = prox_eta E on the body and wall diagonal and -prox_eta on the
 // multiplier diagonal, nothing else.
 TEST(ContactProblem, ProximalTermIsRhoOnBodyAndWallDiagonal) {
