@@ -33,6 +33,18 @@
 //   force and torque of every body below tol P <d> and tol P <d>^2, every
 //   nodal force and contact row below tol P <d>, the contact states stable
 //   and phi settled to -level_phi_rtol over the last step.
+//   With -level_merit energy a step is also accepted when it decreases
+//   the energy merit
+//       psi(z) = H(z) + nu sum_c max(0, -g_c) + sum_c mu lambda_n,c |s_c|,
+//   H the enthalpy (strain energy + P x box area), nu above every normal
+//   force of the iterate and of the step's end point (an exact l1 penalty),
+//   the friction a Tresca dissipation with the normal forces lagged at the
+//   iterate (s_c the incremental slip). For it the step must descend, so the
+//   shift grows (a factorization each) until d_x^T (K + rho D) d_x > 0 on
+//   the step's body and wall part: the inertia-free test of the interior
+//   solver, since MUMPS's LU gives no inertia. The energy alone is not
+//   enough: steps that close an open contact or slip against a lagged bound
+//   cross a kink of psi, and are the ones |G| accepts.
 //   PETSc's SNESNEWTONTR does not fit: its trust region is a dogleg in the
 //   2-norm of all unknowns (multipliers included), which neither bounds the
 //   move of each body nor regularizes floppy modes, and its line searches
