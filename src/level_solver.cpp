@@ -344,7 +344,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         PetscCall(KSPGetConvergedReason(ksp_, &kreason));
         ok = kreason > 0;
       }
-      double curvature = INFINITY;
+      bool negative_curvature = false;
       if (ok && energy) {
         // The energy merit needs a descent direction: with the contact rows
         // of d holding, the energy's slope along d is -d_x^T (K + rho D) d_x
@@ -355,15 +355,15 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         // cannot give as an inertia), as the interior solver does.
         PetscCall(VecPointwiseMult(work_, d_, body_mask_));
         PetscCall(MatMult(J_, work_, Ft_));
+        double curvature;
         PetscCall(VecDot(work_, Ft_, &curvature));
-        ok = curvature > 0.0;
-        if (!ok && prm_.monitor)
+        negative_curvature = !(curvature > 0.0);
+        ok = !negative_curvature;
+        if (negative_curvature && prm_.monitor)
           PetscCall(PetscPrintf(comm_, "    newton %3" PetscInt_FMT "  curvature %.2e <= 0 at rho %.1e: a larger shift\n",
                                 report->newton_its, curvature, rho));
       }
-      if (!ok && std::isfinite(curvature)) {
-        // negative curvature: a larger shift, below
-      } else if (!ok) {
+      if (!ok && !negative_curvature) {
         // A failed factorization: MUMPS out of workspace gets a larger one
         // (a new layout); anything else (a singular matrix) a larger shift.
         if (out_of_memory && p_.GrowFactorWorkspace()) {

@@ -24,6 +24,7 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "deformix/contact_law.hpp"
@@ -381,6 +382,15 @@ TEST(ContactProblem, MeritIsThePotentialOfTheBarrierResidual) {
   for (Vec *v : {&zv, &Fv, &gap, &stiff, &target, &rows}) VecDestroy(v);
 }
 
+// The PETSc index of the unknown that DescribeUnknown names `what` (-1: none).
+PetscInt FindUnknown(const CompactionProblem &problem, Vec z, const std::string &what) {
+  PetscInt n;
+  VecGetSize(z, &n);
+  for (PetscInt i = 0; i < n; ++i)
+    if (problem.DescribeUnknown(problem.NaturalIndex(i)) == what) return i;
+  return -1;
+}
+
 // The contact part of newton's energy merit (ContactPenalty): a rigid disk
 // of diameter 1 in a box of side 1, moved by delta towards the right wall,
 // overlaps it by exactly delta and leaves the left wall by delta; the walls
@@ -400,10 +410,7 @@ TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
   Mat J;
   KSP ksp;
   ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
-  PetscInt n, x_dof = -1;
-  ASSERT_PETSC(VecGetSize(z, &n));
-  for (PetscInt i = 0; i < n; ++i)
-    if (problem.DescribeUnknown(problem.NaturalIndex(i)) == "rigid particle 0 dof 0") x_dof = i;
+  const PetscInt x_dof = FindUnknown(problem, z, "rigid particle 0 dof 0");
   ASSERT_GE(x_dof, 0);
   ASSERT_EQ(problem.Sizes().normal, 4) << "the four wall contacts";
   Vec zt;
@@ -439,13 +446,7 @@ TEST(ContactProblem, EnergyMeritDissipationIsTrescaWithLaggedNormalForce) {
   KSP ksp;
   ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
   ASSERT_EQ(problem.Sizes().normal, 1) << "the pair, no wall within reach";
-  PetscInt n, y_dof = -1, lambda_dof = -1;
-  ASSERT_PETSC(VecGetSize(z, &n));
-  for (PetscInt i = 0; i < n; ++i) {
-    const std::string what = problem.DescribeUnknown(problem.NaturalIndex(i));
-    if (what == "rigid particle 1 dof 1") y_dof = i;
-    if (what == "lambda_n") lambda_dof = i;
-  }
+  const PetscInt y_dof = FindUnknown(problem, z, "rigid particle 1 dof 1"), lambda_dof = FindUnknown(problem, z, "lambda_n");
   ASSERT_GE(y_dof, 0);
   ASSERT_GE(lambda_dof, 0);
   const double lambda_n = 0.3;
