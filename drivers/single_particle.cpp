@@ -5,17 +5,18 @@ static const char help[] =
     "of -pressures (P/E) is reached quasistatically with automatic sub-stepping; at every level the\n"
     "packing fraction phi_p = particle area / box area is exact equilibrium of\n"
     "    min  sum_e W(F) + P * box_area   subject to   gap(node, wall) >= 0,\n"
-    "solved by semismooth Newton on the KKT system (PETSc SNES, MUMPS LU).\n\n"
+    "solved by semismooth Newton on the KKT system (MUMPS LU), each step accepted by that energy\n"
+    "(-level_solver auto, compact's level solver; docs/level-solver.md).\n\n"
     "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (deformed meshes; levels.xdmf\n"
     "beside it opens in ParaView) and\n"
     "<output_dir>/checkpoint.h5 (after every level: what -restart needs to continue the run).\n\n"
     "Examples:\n"
     "  build/bin/single-particle -mesh_triangles 92 -output_dir out/sp\n"
-    "  build/bin/single-particle -pressures 0.5 -nu 0.4999 -newton_monitor\n"
+    "  build/bin/single-particle -pressures 0.5 -nu 0.4999 -level_monitor\n"
     "  mpirun -n 2 build/bin/single-particle -options_file petsc-options/single-particle.opts\n"
     "  build/bin/single-particle -pressures 1e-4,1e-3,0.01,0.1 -restart out/single-particle/checkpoint.h5\n\n"
-    "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view); -newton_monitor prints\n"
-    "each Newton iteration with the number of active contacts.\n\n";
+    "PETSc solver options apply as usual (-ksp_*, -pc_*, -log_view); -level_monitor prints\n"
+    "each trial step with its merit and the number of closed contacts.\n\n";
 
 #include <petscsnes.h>
 

@@ -12,7 +12,7 @@ namespace deformix {
 
 PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
   PetscInt choice = static_cast<PetscInt>(strategy);
-  const char *const names[] = {"newton", "anchored", "interior", "hybrid"};  // LevelStrategy order
+  const char *const names[] = {"newton", "anchored", "interior", "hybrid", "auto"};  // LevelStrategy order
   PetscInt merit_choice = static_cast<PetscInt>(merit);
   const char *const merits[] = {"residual", "energy"};  // LevelMerit order
   PetscFunctionBeginUser;
@@ -24,10 +24,11 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                               "convergence: -ptc_*) or hybrid (a newton attempt of -level_attempt_its linearizations "
                               "from the tangent predictor, then anchored from where it stopped) or interior "
                               "(frictionless levels only: primal-dual interior point on the enthalpy with a barrier on "
-                              "the gaps, then an exact active-set polish)",
-                              "", names, 4, names[choice], &choice, nullptr));
+                              "the gaps, then an exact active-set polish) or auto (newton with the energy merit on "
+                              "levels without friction, hybrid on frictional levels)",
+                              "", names, 5, names[choice], &choice, nullptr));
   PetscCall(PetscOptionsEList("-level_merit",
-                              "newton and hybrid's attempt: what accepts a step: residual (|G| of the proximal "
+                              "newton and hybrid's attempt (auto: its frictional levels): what accepts a step: residual (|G| of the proximal "
                               "subproblem decreases) or energy (|G| decreases, or the energy decreases: the enthalpy "
                               "plus an exact l1 penalty on penetration and Tresca friction with the normal forces "
                               "lagged at the iterate; the shift then grows until the step has positive curvature)",
@@ -944,6 +945,17 @@ PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift,
 PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
                           SolveReport *report) {
   PetscFunctionBeginUser;
+  if (params.strategy == LevelStrategy::Auto) {
+    LevelSolverParameters chosen = params;
+    if (problem.FrictionActive()) {
+      chosen.strategy = LevelStrategy::Hybrid;
+    } else {
+      chosen.strategy = LevelStrategy::Newton;
+      chosen.merit = LevelMerit::Energy;
+    }
+    PetscCall(SolveLevel(problem, chosen, pressure, report));
+    PetscFunctionReturn(0);
+  }
   Progress progress(problem);
   if (params.strategy == LevelStrategy::Anchored) {
     AnchoredContinuation solver(problem, params, progress);

@@ -88,19 +88,24 @@
 // interior: frictionless levels as a constrained minimization of the
 //   enthalpy by a primal-dual interior-point method, then an exact
 //   active-set polish (interior_point.hpp).
+// auto (the default): newton with the energy merit on levels without
+//   friction (a frictionless packing, and the frictionless settling level of
+//   a frictional one), where the enthalpy is the exact potential; hybrid
+//   (with -level_merit) on frictional levels, where steps accepted by the
+//   energy with lagged normal forces can undo each other (docs/level-solver.md).
 #pragma once
 #include "deformix/problem.hpp"
 
 namespace deformix {
 
-enum class LevelStrategy : int { Newton = 0, Anchored = 1, Interior = 2, Hybrid = 3 };
+enum class LevelStrategy : int { Newton = 0, Anchored = 1, Interior = 2, Hybrid = 3, Auto = 4 };
 // What tests a step of newton (and of hybrid's attempt): the residual of the
 // proximal subproblem, or the energy (level_solver.hpp, newton).
 enum class LevelMerit : int { Residual = 0, Energy = 1 };
 
 struct LevelSolverParameters {
-  LevelStrategy strategy = LevelStrategy::Hybrid;
-  PetscInt max_its = 200;     // linearizations per load step before it counts as failed
+  LevelStrategy strategy = LevelStrategy::Auto;
+  PetscInt max_its = 400;     // newton: linearizations per load step before it counts as failed
   PetscInt attempt_its = 30;  // hybrid: linearizations of the newton attempt
   LevelMerit merit = LevelMerit::Residual;  // newton (and hybrid's attempt): -level_merit
   double initial_move = 0.1;  // trust radius m at the start of a load step, in <d>

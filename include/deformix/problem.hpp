@@ -426,6 +426,8 @@ class CompactionProblem {
   // the unknowns (the protocol: settle the packing frictionless, then turn
   // friction on).
   void SetFrictionActive(bool on) { friction_on_ = on; }
+  // Friction acts in this load step: a frictional packing, out of its frictionless settling level.
+  bool FrictionActive() const { return Frictional() && friction_on_; }
   // Makes the current state the start of the load step (reference of the incremental slip).
   void MarkStepStart() { u_start_ = u_; }
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
