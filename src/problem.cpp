@@ -761,7 +761,7 @@ PetscErrorCode CompactionProblem::ContactStepFraction(Vec dz, double *fraction) 
     PetscCall(VecScatterEnd(to_local_, dz, yall, INSERT_VALUES, SCATTER_FORWARD));
     PetscCall(VecGetArrayRead(zall_, &xa));  // the current iterate (gathered by the last residual)
     PetscCall(VecGetArrayRead(yall, &yv));
-    const double allow = 1e-3 * mean_diameter_;
+    const double allow = kOpenOvershoot * mean_diameter_;
     double alpha = 1.0;
     for (size_t ci = 0; ci < candidates_.size(); ++ci) {
       const ContactCandidate &c = candidates_[ci];
@@ -1182,9 +1182,10 @@ PetscErrorCode CompactionProblem::ContactPenalty(double *penetration, double *di
   PetscCheck(tresca_bound_.size() == candidates_.size() && gap_bound_.size() == 2 * candidates_.size(), comm_,
              PETSC_ERR_ORDER, "ContactPenalty needs LagContactWeights and a residual evaluation with the current candidates");
   double local[2] = {0.0, 0.0};
+  const double overshoot = kOpenOvershoot * mean_diameter_;
   for (size_t c = 0; c < candidates_.size(); ++c) {
     if (CandidateOwner(candidates_[c]) != rank_) continue;
-    local[0] += std::max(0.0, -gap_bound_[2 * c]);
+    local[0] += std::max(0.0, -gap_bound_[2 * c] - overshoot);
     local[1] += tresca_bound_[c] * std::abs(slip_now_[c]);
   }
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, local, 2, MPI_DOUBLE, MPI_SUM, comm_));

@@ -393,8 +393,10 @@ PetscInt FindUnknown(const CompactionProblem &problem, Vec z, const std::string 
 
 // The contact part of newton's energy merit (ContactPenalty): a rigid disk
 // of diameter 1 in a box of side 1, moved by delta towards the right wall,
-// overlaps it by exactly delta and leaves the left wall by delta; the walls
-// are frictionless, so no dissipation. Next test: a rigid pair with
+// overlaps it by exactly delta and leaves the left wall by delta; the
+// penalty counts the overlap beyond the overshoot a Newton step may leave
+// (kOpenOvershoot <d>, here <d> = 1); the walls are frictionless, so no
+// dissipation. Next test: a rigid pair with
 // friction, where the dissipation is mu lambda_n |s| with lambda_n lagged by
 // LagContactWeights at the iterate.
 TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
@@ -415,7 +417,8 @@ TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
   ASSERT_EQ(problem.Sizes().normal, 4) << "the four wall contacts";
   Vec zt;
   ASSERT_PETSC(VecDuplicate(z, &zt));
-  for (double delta : {1e-3, 2e-2}) {
+  const double overshoot = CompactionProblem::kOpenOvershoot * problem.MeanDiameter();
+  for (double delta : {0.5 * overshoot, 2e-2}) {
     ASSERT_PETSC(VecCopy(z, zt));
     ASSERT_PETSC(VecSetValue(zt, x_dof, delta, ADD_VALUES));
     ASSERT_PETSC(VecAssemblyBegin(zt));
@@ -424,7 +427,7 @@ TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
     ASSERT_PETSC(problem.LagContactWeights());
     double penetration = -1.0, dissipation = -1.0;
     ASSERT_PETSC(problem.ContactPenalty(&penetration, &dissipation));
-    EXPECT_NEAR(penetration, delta, 1e-12) << "delta " << delta;
+    EXPECT_NEAR(penetration, std::max(0.0, delta - overshoot), 1e-12) << "delta " << delta;
     EXPECT_EQ(dissipation, 0.0) << "frictionless walls";
   }
   ASSERT_PETSC(VecDestroy(&zt));

@@ -275,9 +275,7 @@ TEST(CoulombLaw, SwitchMarginsOfChangedStates) {
 // Zero penetration, multiplier signs, complementarity and the Coulomb cone
 // in a random 20-disk mixture (kappa 0.5, friction 0.2), two levels, with
 // the deformable pairs' contact law `law`.
-void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
-                                  LevelStrategy strategy = LevelStrategy::Anchored, bool body_criterion = true,
-                                  LevelMerit merit = LevelMerit::Residual) {
+std::unique_ptr<CompactionProblem> TwentyDiskMixture(DeformableContact law, PetscBool retry_fb, int *n_def) {
   DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
   assign_deformable(packing, 0.5, 1);
   ProblemParameters p;
@@ -288,9 +286,19 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
   p.ptc_move = 0.02;
   p.newton_max_move = 0.05;
   p.level_force_rtol = 1e-4;
-  CompactionProblem problem(PETSC_COMM_WORLD);
-  ASSERT_PETSC(problem.SetParameters(p));
-  const int n_def = problem.AddPacking(packing, make_disk_mesh(1.0, 92, 2));
+  auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
+  if (problem->SetParameters(p)) return nullptr;
+  *n_def = problem->AddPacking(packing, make_disk_mesh(1.0, 92, 2));
+  return problem;
+}
+
+void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
+                                  LevelStrategy strategy = LevelStrategy::Anchored, bool body_criterion = true,
+                                  LevelMerit merit = LevelMerit::Residual) {
+  int n_def = 0;
+  auto scene = TwentyDiskMixture(law, retry_fb, &n_def);
+  ASSERT_TRUE(scene);
+  CompactionProblem &problem = *scene;
   const int n_rigid = problem.NumParticles() - n_def;
   ASSERT_GT(n_def, 0);
   ASSERT_GT(n_rigid, 0);
@@ -347,6 +355,49 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
 
 TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
   CheckRandomTwentyDiskMixture(DeformableContact::NodeToSegment, PETSC_TRUE);
+}
+
+// -level_solver auto is newton with the energy merit on the frictionless
+// settling level and hybrid (with the residual merit) once friction acts:
+// the same Newton iterations, factorizations and state, to the last bit, as
+// those two strategies chosen by hand.
+TEST(Mixture, AutoLevelSolverChoosesByFriction) {
+  struct Run {
+    PetscInt its[2] = {0, 0};
+    PetscInt factorizations[2] = {0, 0};
+    double walls[4] = {0.0, 0.0, 0.0, 0.0};
+  };
+  const auto run = [](bool by_hand, Run *out) {
+    int n_def = 0;
+    auto problem = TwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, &n_def);
+    ASSERT_TRUE(problem);
+    LoadControlParameters load;
+    EXPECT_EQ(load.level.strategy, LevelStrategy::Auto) << "the default level solver";
+    double step = -1.0;
+    int level = 0;
+    for (double P : {1e-4, 1e-3}) {
+      problem->SetFrictionActive(level > 0);
+      if (by_hand) {
+        load.level.strategy = level > 0 ? LevelStrategy::Hybrid : LevelStrategy::Newton;
+        load.level.merit = level > 0 ? LevelMerit::Residual : LevelMerit::Energy;
+      }
+      LevelReport rep;
+      ASSERT_PETSC(AdvanceToPressure(*problem, load, P, &step, &rep));
+      out->its[level] = rep.newton_its, out->factorizations[level] = rep.factorizations;
+      ++level;
+    }
+    std::copy(problem->Walls(), problem->Walls() + 4, out->walls);
+  };
+  Run automatic, by_hand;
+  run(false, &automatic);
+  run(true, &by_hand);
+  for (int level = 0; level < 2; ++level) {
+    std::printf("  level %d: auto %" PetscInt_FMT " Newton its, by hand %" PetscInt_FMT "\n", level, automatic.its[level],
+                by_hand.its[level]);
+    EXPECT_EQ(automatic.its[level], by_hand.its[level]) << "level " << level;
+    EXPECT_EQ(automatic.factorizations[level], by_hand.factorizations[level]) << "level " << level;
+  }
+  for (int k = 0; k < 4; ++k) EXPECT_EQ(automatic.walls[k], by_hand.walls[k]) << "wall " << k;
 }
 
 // The same with compact's defaults: mortar gaps (ContactForce::gap is then
@@ -491,7 +542,10 @@ TEST(Mixture, PredictionOverlapLimit) {
 }
 
 // A 12-disk all-deformable packing (40-triangle disks) with two-pass
-// deformable contact and the compact driver's solver settings.
+// deformable contact and the compact driver's solver settings. Its tests
+// check the contact rows to the Newton tolerance, so they solve with hybrid,
+// whose anchored part accepts a level only with exact contact rows (newton's
+// per-body criterion leaves closed gaps up to 1e-4 P <d> / c_n).
 std::unique_ptr<CompactionProblem> TwoPassPacking(double friction) {
   DiskPacking packing = make_jammed_packing(12, 2, PackingOptions());
   assign_deformable(packing, 1.0, 1);
@@ -516,6 +570,7 @@ TEST(Mixture, TwoPassKeepsTheNodesOfBothDisksOut) {
   ASSERT_TRUE(owner);
   CompactionProblem &problem = *owner;
   LoadControlParameters load;
+  load.level.strategy = LevelStrategy::Hybrid;
   double step = -1.0;
   for (double P : {1e-3, 0.05}) {
     LevelReport rep;
@@ -544,6 +599,7 @@ TEST(Mixture, TwoPassWithFrictionConverges) {
   ASSERT_TRUE(owner);
   CompactionProblem &problem = *owner;
   LoadControlParameters load;
+  load.level.strategy = LevelStrategy::Hybrid;
   double step = -1.0;
   int level = 0;
   for (double P : {1e-3, 3e-3}) {
@@ -618,6 +674,8 @@ double DeepestBoundaryOverlap(const CompactionProblem &problem) {
 // 1.3e-2 and 7.1e-3 <d>; on these coarse 54-triangle disks the cell-average
 // condition itself allows ~1e-3 <d> at point contacts, mortar_kinematics.cpp),
 // and the level is an equilibrium (contact stress = P, multipliers >= 0).
+// Solved with hybrid, for constrained gaps exact to the Newton tolerance (as
+// the two-pass tests above).
 TEST(Mixture, MortarGapKeepsTheBoundariesApart) {
   double overlap[2] = {0.0, 0.0};
   for (int mortar = 0; mortar < 2; ++mortar) {
@@ -634,6 +692,7 @@ TEST(Mixture, MortarGapKeepsTheBoundariesApart) {
     ASSERT_PETSC(problem.SetParameters(p));
     ASSERT_EQ(problem.AddPacking(packing, make_disk_mesh(1.0, 40, 2)), 12);
     LoadControlParameters load;
+    load.level.strategy = LevelStrategy::Hybrid;
     double step = -1.0;
     PetscInt its = 0;
     for (double P : {1e-3, 0.02, 0.1}) {

@@ -249,6 +249,10 @@ class CompactionProblem {
   // The deepest overlap of a predicted state, in <d>, for strategies whose
   // first steps are strongly damped (anchored, interior).
   static constexpr double kPredictionOverlap = 1e-3;
+  // How far a Newton step may drive an open contact into penetration, in
+  // <d> (ContactStepFraction): the next linearization closes it. The energy
+  // merit penalizes only penetration beyond it (ContactPenalty).
+  static constexpr double kOpenOvershoot = 1e-3;
   // A state the first Newton step of a load step can start from: no element
   // inverted, no overlap deeper than overlap_limit <d> (BeginLoadStep).
   bool PredictionAdmissible(double overlap_limit) const;
@@ -296,11 +300,16 @@ class CompactionProblem {
   // the current state's multipliers, the Tresca bound mu lambda_n,c of every
   // frictional candidate (friction with lagged normal forces); then, at the
   // last residual evaluation, ContactPenalty gives the penetration
-  // sum_c max(0, -g_c) and the dissipation sum_c mu lambda_n,c |s_c|, s_c the
-  // incremental slip of the load step. Merit() + nu x penetration +
-  // dissipation is the incremental potential of the frictional problem with
-  // the normal forces lagged, its penetration penalized exactly for nu above
-  // every normal force. Collective; the bounds are lost with the candidates.
+  // sum_c max(0, -g_c - kOpenOvershoot <d>) and the dissipation
+  // sum_c mu lambda_n,c |s_c|, s_c the incremental slip of the load step.
+  // Merit() + nu x penetration + dissipation is the incremental potential of
+  // the frictional problem with the normal forces lagged, its penetration
+  // penalized exactly for nu above every normal force, except for the
+  // overshoot that a step may leave to the next linearization (a contact
+  // that opened to round-off and is driven back in raises an l1 penalty at
+  // first order: the merit would stop the step that closes it, the Maratos
+  // effect of SQP's l1 merit). Collective; the bounds are lost with the
+  // candidates.
   PetscErrorCode LagContactWeights();
   PetscErrorCode ContactPenalty(double *penetration, double *dissipation) const;
   // Largest normal multiplier of z (collective).
@@ -323,7 +332,8 @@ class CompactionProblem {
   // window at the current state: RefreshCandidates, then continue.
   PetscErrorCode CandidatesStale(bool *stale) const;
   // Largest fraction (>= 1/10) of the update dz that does not drive an open
-  // contact deep into penetration; needs the residual last evaluated at the iterate.
+  // contact deeper than kOpenOvershoot <d> into penetration; needs the
+  // residual last evaluated at the iterate.
   PetscErrorCode ContactStepFraction(Vec dz, double *fraction);
   // The last residual evaluation met an inverted element.
   bool Inverted() const { return inverted_; }
