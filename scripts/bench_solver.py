@@ -184,7 +184,7 @@ def plot(rows, runs, strategies, path, title):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", nargs="+", default=["default"])
-    ap.add_argument("--strategies", nargs="+", default=["anchored", "hybrid"])
+    ap.add_argument("--strategies", nargs="+", default=["hybrid", "auto"])
     ap.add_argument("--only", nargs="+", default=[], help="run labels to keep (e.g. n400_k0.5_mu0.2); default: all")
     ap.add_argument("--pressures", default="", help="P/E list of the 50-, 400- and 1500-disk runs")
     ap.add_argument("--ranks", type=int, default=2, help="MPI ranks of paper1500")

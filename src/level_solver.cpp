@@ -30,12 +30,12 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsEList("-level_merit",
                               "newton and hybrid's attempt (auto: its frictional levels): what accepts a step: residual (|G| of the proximal "
                               "subproblem decreases) or energy (|G| decreases, or the energy decreases: the enthalpy "
-                              "plus an exact l1 penalty on penetration and Tresca friction with the normal forces "
+                              "plus an exact l1 penalty on penetration beyond 1e-3 <d> and Tresca friction with the normal forces "
                               "lagged at the iterate; the shift then grows until the step has positive curvature)",
                               "", merits, 2, merits[merit_choice], &merit_choice, nullptr));
   PetscCall(PetscOptionsInt("-level_attempt_its", "hybrid: linearizations of the newton attempt before anchored takes over", "",
                             attempt_its, &attempt_its, nullptr));
-  PetscCall(PetscOptionsInt("-level_max_its", "newton: linearizations per load step before the step is cut", "", max_its,
+  PetscCall(PetscOptionsInt("-level_max_its", "newton (and auto's frictionless levels): linearizations per load step before the step is halved", "", max_its,
                             &max_its, nullptr));
   PetscCall(PetscOptionsReal("-level_initial_move",
                              "newton: trust radius at the start of a load step (largest move of a body under the "

@@ -35,9 +35,11 @@
 //   and phi settled to -level_phi_rtol over the last step.
 //   With -level_merit energy a step is also accepted when it decreases
 //   the energy merit
-//       psi(z) = H(z) + nu sum_c max(0, -g_c) + sum_c mu lambda_n,c |s_c|,
+//       psi(z) = H(z) + nu sum_c max(0, -g_c - e) + sum_c mu lambda_n,c |s_c|,
 //   H the enthalpy (strain energy + P x box area), nu above every normal
 //   force of the iterate and of the step's end point (an exact l1 penalty),
+//   e = 1e-3 <d> the overshoot a step may leave to the next linearization
+//   (CompactionProblem::kOpenOvershoot),
 //   the friction a Tresca dissipation with the normal forces lagged at the
 //   iterate (s_c the incremental slip). For it the step must descend, so the
 //   shift grows (a factorization each) until d_x^T (K + rho D) d_x > 0 on
