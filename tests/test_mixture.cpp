@@ -358,9 +358,10 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
 }
 
 // -level_solver auto is newton with the energy merit on the frictionless
-// settling level and hybrid (with the residual merit) once friction acts:
-// the same Newton iterations, factorizations and state, to the last bit, as
-// those two strategies chosen by hand.
+// settling level, whatever -level_merit says, and hybrid with -level_merit
+// (here residual, with an attempt of 30) once friction acts: the same Newton
+// iterations, factorizations and state, to the last bit, as those two
+// strategies chosen by hand.
 TEST(Mixture, AutoLevelSolverChoosesByFriction) {
   struct Run {
     PetscInt its[2] = {0, 0};
@@ -373,6 +374,8 @@ TEST(Mixture, AutoLevelSolverChoosesByFriction) {
     ASSERT_TRUE(problem);
     LoadControlParameters load;
     EXPECT_EQ(load.level.strategy, LevelStrategy::Auto) << "the default level solver";
+    load.level.merit = LevelMerit::Residual;
+    load.level.attempt_its = 30;
     double step = -1.0;
     int level = 0;
     for (double P : {1e-4, 1e-3}) {
