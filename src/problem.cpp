@@ -613,7 +613,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   // While friction acts (a frictional problem with friction switched on) the
   // rotation is physical: the gauge is released, R_mu = (E / R_b) mu_b, with
   // the same sparsity pattern.
-  const bool gauge_on = !(Frictional() && friction_on_);
+  const bool gauge_on = !FrictionActive();
   for (size_t b = 0; b < torque_.size(); ++b) {
     const DeformableBody &body = bodies_[b];
     if (ParticleOwner(body.particle) != rank_) continue;

@@ -396,9 +396,8 @@ PetscInt FindUnknown(const CompactionProblem &problem, Vec z, const std::string 
 // overlaps it by exactly delta and leaves the left wall by delta; the
 // penalty counts the overlap beyond the overshoot a Newton step may leave
 // (kOpenOvershoot <d>, here <d> = 1); the walls are frictionless, so no
-// dissipation. Next test: a rigid pair with
-// friction, where the dissipation is mu lambda_n |s| with lambda_n lagged by
-// LagContactWeights at the iterate.
+// dissipation. Next test: a rigid pair with friction, where the dissipation
+// is mu lambda_n |s| with lambda_n lagged by LagContactWeights at the iterate.
 TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
   ProblemParameters params;
   params.friction = 0.2;
