@@ -304,16 +304,17 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
     }
     // The paper's level criterion (-level_force_rtol > 0), per body: every
     // body's net force and torque below tol P <d> and tol P <d>^2, every
-    // nodal force and contact row below tol P <d>, the contact states
+    // nodal force below tol P <d>, every contact row exact (below the
+    // Newton tolerance, as anchored's criterion has it), the contact states
     // stable and phi settled over the last step.
     if (relaxed_tol > 0.0 && report->newton_its > 0 && stable && std::abs(phi - phi_before) <= phi_tol * phi) {
       CompactionProblem::Balance b;
       PetscCall(p_.BodyBalance(F_, &b));
       const double f_tol = relaxed_tol * pressure * dmean;
       if (prm_.monitor)
-        PetscCall(PetscPrintf(comm_, "    level criterion: body force %.2e torque %.2e node %.2e contact rows %.2e (tolerance %.2e), phi change %.1e\n",
-                              b.body_force, b.body_torque / dmean, b.node_force, b.contact_row, f_tol, std::abs(phi - phi_before) / phi));
-      if (b.body_force <= f_tol && b.body_torque <= f_tol * dmean && b.node_force <= f_tol && b.contact_row <= f_tol) {
+        PetscCall(PetscPrintf(comm_, "    level criterion: body force %.2e torque %.2e node %.2e contact rows %.2e (tolerance %.2e, contact rows %.2e), phi change %.1e\n",
+                              b.body_force, b.body_torque / dmean, b.node_force, b.contact_row, f_tol, atol, std::abs(phi - phi_before) / phi));
+      if (b.body_force <= f_tol && b.body_torque <= f_tol * dmean && b.node_force <= f_tol && b.contact_row <= atol) {
         bool stale = false;
         PetscCall(p_.CandidatesStale(&stale));
         if (!stale) {
@@ -329,7 +330,10 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
       report->reason = SNES_DIVERGED_MAX_IT;
       break;
     }
-    // One linearization per iteration.
+    // One linearization per iteration. The energy is not defined where an
+    // element is inverted (a start state handed over folded): there the
+    // step is tested on |G| alone, which does not need descent of the energy.
+    const bool energy_step = energy && !inverted;
     PetscCall(p_.NewtonMatrix(z_, J_));
     rho_in_matrix_ = 0.0;
     ++report->newton_its;
@@ -346,7 +350,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         ok = kreason > 0;
       }
       bool negative_curvature = false;
-      if (ok && energy) {
+      if (ok && energy_step) {
         // The energy merit needs a descent direction: with the contact rows
         // of d holding, the energy's slope along d is -d_x^T (K + rho D) d_x
         // (d_x its body and wall part, K the Hessian of the Lagrangian), so
@@ -392,7 +396,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         PetscCall(VecPointwiseMult(work_, d_, sqrt_weight_));
         PetscCall(VecNorm(work_, NORM_INFINITY, &full_move));
         if (full_move > move * dmean) alpha0 = std::min(alpha0, move * dmean / full_move);
-        if (energy) {
+        if (energy_step) {
           // The exact penalty needs nu above every normal force, those of
           // the step's end point included (the l1 merit of SQP).
           double largest_now, largest_next;
@@ -414,7 +418,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
           if (!std::isfinite(trial_norm)) trial_gnorm = INFINITY;
           const bool residual_decreased = trial_gnorm <= (1.0 - 1e-4 * alpha) * gnorm;
           double trial_psi = 0.0, psi = 0.0;
-          if (energy) {
+          if (energy_step) {
             // Either merit may accept: the energy where it decreases beyond
             // round-off (its sum over elements carries about 1e-16 of each
             // term), or |G|. The energy accepts the steps of a rearrangement
@@ -444,7 +448,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
                                   report->newton_its, fnorm, gnorm, trial_gnorm, trial_norm, force, move, rho, alpha, step,
                                   accepted ? "accepted" : "rejected", closed, sliding, blocks[0], blocks[1], blocks[2],
                                   blocks[3], blocks[4]));
-            if (energy)
+            if (energy_step)
               PetscCall(PetscPrintf(comm_, "  energy change %+.3e of %.6e (enthalpy %+.3e, nu %.2e x penetration %+.3e, dissipation %+.3e)",
                                     trial_psi - psi, psi, trial_parts.enthalpy - at_z.enthalpy, nu,
                                     trial_parts.penetration - at_z.penetration, trial_parts.dissipation - at_z.dissipation));

@@ -858,12 +858,13 @@ TEST(ContactProblem, GaugeTorqueVanishesAtEquilibrium) {
 // Inverted element: no level solver accepts it. Started from a folded mesh,
 // anchored fails with a domain error and leaves the state as it was (the
 // load controller then cuts the step); the merit-tested strategies (newton,
-// hybrid's attempt) rate the folded state as infinitely bad, so any
+// hybrid's attempt, auto, which is newton with the energy merit on this
+// frictionless disk) rate the folded state as infinitely bad, so any
 // unfolding step is accepted: they may reach an equilibrium, which must then
 // be unfolded and balanced.
 TEST(ContactProblem, InvertedStateIsNeverAccepted) {
-  const char *const labels[] = {"newton", "anchored", "interior", "hybrid"};  // LevelStrategy order
-  for (LevelStrategy strategy : {LevelStrategy::Anchored, LevelStrategy::Newton, LevelStrategy::Hybrid}) {
+  const char *const labels[] = {"newton", "anchored", "interior", "hybrid", "auto"};  // LevelStrategy order
+  for (LevelStrategy strategy : {LevelStrategy::Anchored, LevelStrategy::Newton, LevelStrategy::Hybrid, LevelStrategy::Auto}) {
     const char *label = labels[static_cast<int>(strategy)];
     ProblemParameters params;
     auto problem = MakeDisk(params, 24);

@@ -31,8 +31,9 @@
 //   within 1e3 atol of their switch excepted, contact_law.hpp), or, with
 //   -level_force_rtol tol > 0, by the paper's criterion per body: the net
 //   force and torque of every body below tol P <d> and tol P <d>^2, every
-//   nodal force and contact row below tol P <d>, the contact states stable
-//   and phi settled to -level_phi_rtol over the last step.
+//   nodal force below tol P <d>, every contact row exact (below 1e-11 E <d>),
+//   the contact states stable and phi settled to -level_phi_rtol over the
+//   last step.
 //   With -level_merit energy a step is also accepted when it decreases
 //   the energy merit
 //       psi(z) = H(z) + nu sum_c max(0, -g_c - e) + sum_c mu lambda_n,c |s_c|,
