@@ -135,7 +135,7 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
   PetscFunctionBeginUser;
   // Contacts: -lambda_n dg - lambda_t ds in the equilibrium rows, the NCP
   // functions in the multiplier rows.
-  const double c_n = params_.ncp_scale * params_.young, c_t = c_n, mu_f = friction_on_ ? params_.friction : 0.0;
+  const double c_n = params_.ncp_scale * params_.young, c_t = c_n, mu_f = FrictionActive() ? params_.friction : 0.0;
   // Dual proximal term: -delta on the multiplier diagonal of the Newton matrix.
   // Redundant constraints (hyperstatic rigid contacts, a square lattice) leave
   // the multipliers indeterminate and the KKT matrix singular; the term keeps

@@ -946,8 +946,10 @@ PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift,
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
-                          SolveReport *report) {
+namespace {
+
+PetscErrorCode SolveLevelBy(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
+                            SolveReport *report) {
   PetscFunctionBeginUser;
   if (params.strategy == LevelStrategy::Auto) {
     LevelSolverParameters chosen = params;
@@ -957,7 +959,7 @@ PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameter
       chosen.strategy = LevelStrategy::Newton;
       chosen.merit = LevelMerit::Energy;
     }
-    PetscCall(SolveLevel(problem, chosen, pressure, report));
+    PetscCall(SolveLevelBy(problem, chosen, pressure, report));
     PetscFunctionReturn(0);
   }
   Progress progress(problem);
@@ -989,6 +991,17 @@ PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameter
   }
   MeritNewton solver(problem, params, progress);
   PetscCall(solver.Solve(pressure, report));
+  PetscFunctionReturn(0);
+}
+
+}  // namespace
+
+PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
+                          SolveReport *report) {
+  PetscFunctionBeginUser;
+  const int predictor_before = problem.PredictorFactorizations();
+  PetscCall(SolveLevelBy(problem, params, pressure, report));
+  report->factorizations += problem.PredictorFactorizations() - predictor_before;  // the tangent's
   PetscFunctionReturn(0);
 }
 

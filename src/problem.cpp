@@ -1170,7 +1170,7 @@ PetscErrorCode CompactionProblem::ResidualBlocks(Vec F, double norm[5]) const {
 
 PetscErrorCode CompactionProblem::LagContactWeights() {
   PetscFunctionBeginUser;
-  const double mu_f = friction_on_ ? params_.friction : 0.0;
+  const double mu_f = FrictionActive() ? params_.friction : 0.0;
   tresca_bound_.assign(candidates_.size(), 0.0);
   for (size_t c = 0; c < candidates_.size() && c < lambda_.size(); ++c)
     if (tangential_index_[c] >= 0) tresca_bound_[c] = mu_f * std::max(lambda_[c], 0.0);
@@ -1302,6 +1302,7 @@ PetscErrorCode CompactionProblem::TangentPredictor(double dP, double overlap_lim
   PetscCall(KSPSetOperators(ksp, J, J));
   bool ok = false;
   PetscCall(FactorOnEveryRank(ksp, &ok));
+  ++predictor_factorizations_;
   if (ok) {
     PetscCall(VecDuplicate(z, &dz));
     PetscCall(VecDuplicate(z, &zt));

@@ -855,6 +855,28 @@ TEST(ContactProblem, GaugeTorqueVanishesAtEquilibrium) {
   }
 }
 
+// The tangent predictor factors the Newton matrix once per load step, and
+// the level's report counts it: with anchored (one factorization per Newton
+// iteration) the first level, which has no tangent, counts its iterations,
+// the next one its iterations plus one.
+TEST(ContactProblem, TangentPredictorFactorizationIsCounted) {
+  ProblemParameters params;
+  params.predictor = LoadPredictor::Tangent;
+  auto problem = MakeDisk(params, 24);
+  ASSERT_TRUE(problem);
+  LoadControlParameters load;
+  load.level.strategy = LevelStrategy::Anchored;
+  double step = -1.0;
+  const double pressures[] = {0.02, 0.05};
+  for (int level = 0; level < 2; ++level) {
+    LevelReport rep;
+    ASSERT_PETSC(AdvanceToPressure(*problem, load, pressures[level], &step, &rep));
+    ASSERT_TRUE(rep.converged);
+    ASSERT_EQ(rep.cuts, 0) << "one load step per level";
+    EXPECT_EQ(rep.factorizations, rep.newton_its + level) << "P/E = " << pressures[level];
+  }
+}
+
 // Inverted element: no level solver accepts it. Started from a folded mesh,
 // anchored fails with a domain error and leaves the state as it was (the
 // load controller then cuts the step); the merit-tested strategies (newton,

@@ -179,7 +179,7 @@ struct SolveReport {
   double force_residual = 0.0;  // largest unbalanced force at the accepted state (PTC only)
   bool relaxed = false;         // accepted by the paper's criterion (level_force_rtol), not at |R| <= atol
   int layouts = 0;              // new unknown layouts (each one a new sparsity pattern: symbolic factorization)
-  int factorizations = 0;       // numeric factorizations of the Newton matrix
+  int factorizations = 0;       // numeric factorizations of the Newton matrix (the tangent predictor's included)
 };
 
 // Sizes of the current unknown layout: what the scene needs and nothing else
@@ -267,6 +267,9 @@ class CompactionProblem {
   // twice as much (the current one is destroyed). False when already at the cap.
   bool GrowFactorWorkspace();
   int LayoutsCreated() const { return layouts_created_; }
+  // Numeric factorizations made by the tangent predictor so far (SolveLevel
+  // counts those of its load steps in its report).
+  int PredictorFactorizations() const { return predictor_factorizations_; }
   // Residual F(z) (exact NCP rows; plus the anchor term of SetAnchor) and
   // the Newton matrix J(z) + diag(ProximalDiagonal) in J (the matrix of Layout()).
   PetscErrorCode Residual(Vec z, Vec F) { return EvaluateResidual(z, F); }
@@ -557,6 +560,7 @@ class CompactionProblem {
   double merit_local_ = 0.0;                      // this rank's part, accumulated by Assemble
   std::string options_prefix_;               // of the KSP (and the level solver's SNES)
   int layouts_created_ = 0;         // SetUpLayout calls (symbolic factorizations)
+  int predictor_factorizations_ = 0;  // numeric factorizations of TangentPredictor
   int layouts_at_step_ = 0;         // layouts_created_ at BeginLoadStep
   State step_saved_;                // the state at BeginLoadStep (restored by a failed step)
   double step_saved_pressure_ = 0.0;
