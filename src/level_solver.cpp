@@ -25,7 +25,7 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                               "from the tangent predictor, then anchored from where it stopped) or interior "
                               "(frictionless levels only: primal-dual interior point on the enthalpy with a barrier on "
                               "the gaps, then an exact active-set polish) or auto (newton with the energy merit on "
-                              "levels without friction, hybrid where that fails and on frictional levels)",
+                              "levels without friction, hybrid on frictional levels)",
                               "", names, 5, names[choice], &choice, nullptr));
   PetscCall(PetscOptionsEList("-level_merit",
                               "newton and hybrid's attempt (auto: its frictional levels): what accepts a step: residual (|G| of the proximal "
@@ -35,7 +35,7 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                               "", merits, 2, merits[merit_choice], &merit_choice, nullptr));
   PetscCall(PetscOptionsInt("-level_attempt_its", "hybrid: linearizations of the newton attempt before anchored takes over", "",
                             attempt_its, &attempt_its, nullptr));
-  PetscCall(PetscOptionsInt("-level_max_its", "newton: linearizations per load step before the step is halved (auto's frictionless levels: before hybrid takes it)", "", max_its,
+  PetscCall(PetscOptionsInt("-level_max_its", "newton (and auto's frictionless levels): linearizations per load step before the step is halved", "", max_its,
                             &max_its, nullptr));
   PetscCall(PetscOptionsReal("-level_initial_move",
                              "newton: trust radius at the start of a load step (largest move of a body under the "
@@ -953,24 +953,11 @@ PetscErrorCode SolveLevelBy(CompactionProblem &problem, const LevelSolverParamet
   PetscFunctionBeginUser;
   if (params.strategy == LevelStrategy::Auto) {
     LevelSolverParameters chosen = params;
-    chosen.strategy = LevelStrategy::Hybrid;
-    if (!problem.FrictionActive()) {
-      LevelSolverParameters newton = params;
-      newton.strategy = LevelStrategy::Newton;
-      newton.merit = LevelMerit::Energy;
-      PetscCall(SolveLevelBy(problem, newton, pressure, report));
-      if (report->converged) PetscFunctionReturn(0);
-      // newton failed (the load step is undone): hybrid takes the same step
-      // before the load controller would cut it. Measured: the rigid
-      // settling of the 1500-disk scene, where newton with the energy merit
-      // crawls (steps of 1e-3 of the Newton step) and hybrid converges.
-      const SolveReport first = *report;
-      PetscCall(SolveLevelBy(problem, chosen, pressure, report));
-      report->newton_its += first.newton_its;
-      report->factorizations += first.factorizations;
-      report->inner_solves += first.inner_solves;
-      report->candidate_refreshes += first.candidate_refreshes;
-      PetscFunctionReturn(0);
+    if (problem.FrictionActive()) {
+      chosen.strategy = LevelStrategy::Hybrid;
+    } else {
+      chosen.strategy = LevelStrategy::Newton;
+      chosen.merit = LevelMerit::Energy;
     }
     PetscCall(SolveLevelBy(problem, chosen, pressure, report));
     PetscFunctionReturn(0);

@@ -877,30 +877,6 @@ TEST(ContactProblem, TangentPredictorFactorizationIsCounted) {
   }
 }
 
-// auto on a frictionless level: when newton (energy merit) fails, hybrid
-// takes the same load step before the load controller would cut it. Forced
-// here by one linearization for newton: auto then reaches the state that
-// hybrid alone reaches, bit for bit, with newton's iteration added.
-TEST(ContactProblem, AutoFallsBackToHybridWhenNewtonFails) {
-  double walls[2][4];
-  PetscInt its[2];
-  for (int automatic = 0; automatic < 2; ++automatic) {
-    ProblemParameters params;
-    auto problem = MakeDisk(params, 24);
-    ASSERT_TRUE(problem);
-    LevelSolverParameters level;
-    level.strategy = automatic ? LevelStrategy::Auto : LevelStrategy::Hybrid;
-    level.max_its = 1;
-    SolveReport rep;
-    ASSERT_PETSC(SolveLevel(*problem, level, 0.05, &rep));
-    ASSERT_TRUE(rep.converged) << (automatic ? "auto" : "hybrid");
-    its[automatic] = rep.newton_its;
-    std::copy(problem->Walls(), problem->Walls() + 4, walls[automatic]);
-  }
-  EXPECT_EQ(its[1], its[0] + 1) << "auto: newton's one iteration, then hybrid's";
-  for (int k = 0; k < 4; ++k) EXPECT_EQ(walls[1][k], walls[0][k]) << "wall " << k;
-}
-
 // Inverted element: no level solver accepts it. Started from a folded mesh,
 // anchored fails with a domain error and leaves the state as it was (the
 // load controller then cuts the step); the merit-tested strategies (newton,

@@ -93,11 +93,9 @@
 //   active-set polish (interior_point.hpp).
 // auto (the default): newton with the energy merit on levels without
 //   friction (a frictionless packing, and the frictionless settling level of
-//   a frictional one), where the enthalpy is the exact potential, and
-//   hybrid on the same load step where newton fails (before the load
-//   controller would cut it); hybrid (with -level_merit) on frictional
-//   levels, where steps accepted by the energy with lagged normal forces
-//   can undo each other (docs/level-solver.md).
+//   a frictional one), where the enthalpy is the exact potential; hybrid
+//   (with -level_merit) on frictional levels, where steps accepted by the
+//   energy with lagged normal forces can undo each other (docs/level-solver.md).
 #pragma once
 #include "deformix/problem.hpp"
 
