@@ -314,10 +314,10 @@ PetscErrorCode Run(MPI_Comm comm) {
     // first levels are then reached by load stepping.
     const double P_settle = std::min(opts.pressures[0], 1e-4) * params.young;
     // auto's newton (energy merit) can fail on a large hyperstatic rigid
-    // network: on the 1500-disk paper scene it crawled through 400
-    // iterations at every one of 17 step cuts (steps of 1e-3 of the Newton
-    // step), where hybrid settles in 213 iterations (11 s on 2 ranks). So
-    // with auto the settling is tried in one step first, then by hybrid.
+    // network: on the 1500-disk paper scene it failed at every one of 17
+    // step cuts (its trial steps' multipliers blow up the contact rows),
+    // where hybrid settles in 213 iterations (11 s on 2 ranks). So with auto
+    // the settling is tried in one step first, then by hybrid.
     if (load.level.strategy == LevelStrategy::Auto) {
       LoadControlParameters once = load;
       once.max_cuts = 0;
