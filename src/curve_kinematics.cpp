@@ -13,7 +13,10 @@
 // are then explicit functions of (q, t*(q)):
 //   g = (p - x) . n,  n = right normal of x' / |x'|  (outward, as for segments),
 //   s = tau . [(p - p0) - sum_i N_i(t*) (P_i - P0_i)],  tau = x' / |x'|.
-// Their first and second derivatives with respect to the 12 unknowns come
+// Their first derivatives are closed-form (first_derivatives: the gap's by
+// the envelope theorem, the slip's with dt*/dq from the implicit function
+// theorem); the residual needs nothing more, and most candidates carry no
+// force. The second derivatives (the Newton matrix of a loaded contact) come
 // from forward-mode automatic differentiation (value, gradient, Hessian),
 // with t*(q) differentiated through the implicit function theorem in the
 // Newton form: t*(q) is found in double precision, then two Newton steps
@@ -229,6 +232,57 @@ void evaluate(const double q[12], const double q0[12], int k, double t_star, Pai
       }
 }
 
+// Gap, slip and their first derivatives on segment k at the converged t, in
+// closed form. With r = p - x(t), a = x'(t), b = x''(t), n and tau = a / |a|:
+//   dg = n . (dp - sum_i N_i dP_i)           (r is parallel to n, n . dn = 0,
+//                                             a . n = 0: t* drops out)
+//   dt = -[(dp - sum_i N_i dP_i) . a + r . sum_i N_i' dP_i] / f_t,
+//        f_t = r . b - a . a                 (implicit function theorem)
+//   ds = (u . n)(n . da) / |a| + tau . du,   da = sum_i N_i' dP_i + b dt,
+//        du = dp - sum_i N_i dP_i - [sum_i N_i' (P_i - P0_i)] dt.
+void first_derivatives(const double q[12], const double q0[12], int k, double t, PairKinematics *out) {
+  double N[4], dN[4], d2N[4];
+  {
+    Real Nr[4], dNr[4], d2Nr[4];
+    basis(Real(t), Nr, dNr, d2Nr);
+    for (int i = 0; i < 4; ++i) N[i] = Nr[i].v, dN[i] = dNr[i].v, d2N[i] = d2Nr[i].v;
+  }
+  double x[2] = {0, 0}, a[2] = {0, 0}, b[2] = {0, 0}, u[2], w[2] = {0, 0};
+  for (int c = 0; c < 2; ++c) {
+    u[c] = q[10 + c] - q0[10 + c];
+    for (int i = 0; i < 4; ++i) {
+      const double P = q[2 * (k + i) + c], dP = P - q0[2 * (k + i) + c];
+      x[c] += N[i] * P, a[c] += dN[i] * P, b[c] += d2N[i] * P;
+      u[c] -= N[i] * dP, w[c] += dN[i] * dP;
+    }
+  }
+  const double r[2] = {q[10] - x[0], q[11] - x[1]};
+  const double la = std::hypot(a[0], a[1]);
+  const double n[2] = {a[1] / la, -a[0] / la}, tau[2] = {a[0] / la, a[1] / la};
+  const double f_t = r[0] * b[0] + r[1] * b[1] - (a[0] * a[0] + a[1] * a[1]);
+  const double un = u[0] * n[0] + u[1] * n[1];
+  out->ndof = kN;
+  out->gap = r[0] * n[0] + r[1] * n[1];
+  out->slip = u[0] * tau[0] + u[1] * tau[1];
+  out->normal[0] = n[0], out->normal[1] = n[1];
+  for (int j = 0; j < kN; ++j) {
+    const int node = j / 2, c = j % 2, i = node - k;  // i: index in the segment's four nodes
+    double Nj = 0.0, dNj = 0.0;                        // x = Nj P (+ p for the slave)
+    if (node == 5) Nj = -1.0;                          // the slave node: dp enters as -(-1) dp
+    else if (i >= 0 && i < 4) Nj = N[i], dNj = dN[i];
+    else {
+      out->dgap[j] = out->dslip[j] = 0.0;
+      continue;
+    }
+    // Unit perturbation of coordinate c: dp - sum N_i dP_i = -Nj e_c, sum N_i' dP_i = dNj e_c.
+    const double dt = -(-Nj * a[c] + r[c] * dNj) / f_t;
+    const double da[2] = {(c == 0 ? dNj : 0.0) + b[0] * dt, (c == 1 ? dNj : 0.0) + b[1] * dt};
+    const double du[2] = {(c == 0 ? -Nj : 0.0) - w[0] * dt, (c == 1 ? -Nj : 0.0) - w[1] * dt};
+    out->dgap[j] = -Nj * n[c];
+    out->dslip[j] = un * (n[0] * da[0] + n[1] * da[1]) / la + tau[0] * du[0] + tau[1] * du[1];
+  }
+}
+
 }  // namespace
 
 PairKinematics curve_node(const double q[12], const double q0[12], bool hessians, int *beyond) {
@@ -277,7 +331,7 @@ PairKinematics curve_node(const double q[12], const double q0[12], bool hessians
   if (hessians)
     evaluate<true>(q, q0, seg, t[seg], &k);
   else
-    evaluate<false>(q, q0, seg, t[seg], &k);
+    first_derivatives(q, q0, seg, t[seg], &k);
   return k;
 }
 
