@@ -735,13 +735,18 @@ void CompactionProblem::SetAnchor(double rho) {
   }
 }
 
-// Contacts open at the current iterate that the linearized update dz would
-// drive deep into penetration (an overshoot of the Newton model, which has
-// them open): the fraction of dz after which they just touch, never below
-// 1/10. Only a contact with gap + allow < sum_a |dgap_a| |dz_a| can do so; the
-// last residual left gap and sum_a |dgap_a| in gap_bound_, so the others are
-// skipped without evaluating their geometry (which costs as much as a
-// residual at 1500 disks). The skip is exact. Collective.
+// Contacts that the linearized update dz would drive deeper than allow =
+// kOpenOvershoot <d> into penetration (an overshoot of the Newton model,
+// which has them open): the fraction of dz after which they reach -allow,
+// never below 1/10. Every contact not yet beyond -allow counts, touching ones
+// (gap at round-off of 0, as every closed contact of a settled state is)
+// included: a cut for gap > 0 only would jump from allow / |dg| to none as
+// the round-off of such a gap changes sign, and make the path depend on the
+// number of ranks and on the BLAS. Only a contact with
+// gap + allow < sum_a |dgap_a| |dz_a| can reach -allow; the last residual left
+// gap and sum_a |dgap_a| in gap_bound_, so the others are skipped without
+// evaluating their geometry (which costs as much as a residual at 1500
+// disks). The skip is exact. Collective.
 PetscErrorCode CompactionProblem::ContactStepFraction(Vec dz, double *fraction) {
   const PetscScalar *ya;
   PetscInt lo, hi;
@@ -766,12 +771,12 @@ PetscErrorCode CompactionProblem::ContactStepFraction(Vec dz, double *fraction) 
     for (size_t ci = 0; ci < candidates_.size(); ++ci) {
       const ContactCandidate &c = candidates_[ci];
       if (CandidateOwner(c) != rank_) continue;
-      if (bounds && (gap_bound_[2 * ci] <= 0.0 ||
+      if (bounds && (gap_bound_[2 * ci] <= -allow ||
                      gap_bound_[2 * ci] + allow > (1.0 + 1e-8) * gap_bound_[2 * ci + 1] * ymax))
         continue;
       CompactionProblem::LocalContact lc;
       ContactGeometry(c, xa, &lc);
-      if (lc.k.gap <= 0.0) continue;
+      if (lc.k.gap <= -allow) continue;
       double dg = 0.0;
       for (int a = 0; a < lc.k.ndof; ++a)
         if (lc.dofs[a] >= 0) dg += lc.k.dgap[a] * yv[lc.dofs[a]];

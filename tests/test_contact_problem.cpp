@@ -432,6 +432,48 @@ TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
   ASSERT_PETSC(VecDestroy(&zt));
 }
 
+// ContactStepFraction on a touching contact: a rigid disk of diameter 1 in a
+// box of side 1 touches the right wall with a gap at round-off of zero, of
+// either sign (a settled state). A step of 5 overshoots towards that wall is
+// cut where the contact reaches -overshoot, at 1/5 of the step, whatever the
+// sign of the round-off: the path must not depend on it (it differs between
+// rank counts and BLAS libraries).
+TEST(ContactProblem, StepFractionIsContinuousAtTouch) {
+  ProblemParameters params;
+  CompactionProblem problem(PETSC_COMM_WORLD);
+  ASSERT_PETSC(problem.SetParameters(params));
+  problem.AddRigidBody(0.0, 0.0, kRadius);
+  const double walls[4] = {-kRadius, kRadius, -kRadius, kRadius};
+  problem.SetWalls(walls);
+  ASSERT_PETSC(problem.RefreshCandidates());
+  Vec z, F;
+  Mat J;
+  KSP ksp;
+  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
+  const PetscInt x_dof = FindUnknown(problem, z, "rigid particle 0 dof 0");
+  ASSERT_GE(x_dof, 0);
+  const double overshoot = CompactionProblem::kOpenOvershoot * problem.MeanDiameter();
+  Vec zt, dz;
+  ASSERT_PETSC(VecDuplicate(z, &zt));
+  ASSERT_PETSC(VecDuplicate(z, &dz));
+  ASSERT_PETSC(VecSet(dz, 0.0));
+  ASSERT_PETSC(VecSetValue(dz, x_dof, 5.0 * overshoot, INSERT_VALUES));
+  ASSERT_PETSC(VecAssemblyBegin(dz));
+  ASSERT_PETSC(VecAssemblyEnd(dz));
+  for (double eps : {-1e-15, 0.0, 1e-15}) {
+    ASSERT_PETSC(VecCopy(z, zt));
+    ASSERT_PETSC(VecSetValue(zt, x_dof, eps, ADD_VALUES));
+    ASSERT_PETSC(VecAssemblyBegin(zt));
+    ASSERT_PETSC(VecAssemblyEnd(zt));
+    ASSERT_PETSC(problem.Residual(zt, F));
+    double fraction = -1.0;
+    ASSERT_PETSC(problem.ContactStepFraction(dz, &fraction));
+    EXPECT_NEAR(fraction, 0.2, 1e-9) << "x offset " << eps;
+  }
+  ASSERT_PETSC(VecDestroy(&zt));
+  ASSERT_PETSC(VecDestroy(&dz));
+}
+
 TEST(ContactProblem, EnergyMeritDissipationIsTrescaWithLaggedNormalForce) {
   ProblemParameters params;
   params.friction = 0.2;

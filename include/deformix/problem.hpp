@@ -334,9 +334,9 @@ class CompactionProblem {
   // True when a non-candidate pair penetrates or a node left its segment
   // window at the current state: RefreshCandidates, then continue.
   PetscErrorCode CandidatesStale(bool *stale) const;
-  // Largest fraction (>= 1/10) of the update dz that does not drive an open
-  // contact deeper than kOpenOvershoot <d> into penetration; needs the
-  // residual last evaluated at the iterate.
+  // Largest fraction (>= 1/10) of the update dz that does not drive a contact
+  // (open or touching) deeper than kOpenOvershoot <d> into penetration; needs
+  // the residual last evaluated at the iterate.
   PetscErrorCode ContactStepFraction(Vec dz, double *fraction);
   // The last residual evaluation met an inverted element.
   bool Inverted() const { return inverted_; }
