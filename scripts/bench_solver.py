@@ -26,7 +26,10 @@ command) and <out>.png (Newton iterations per level and seconds per run).
 --jobs 2 runs two simulations at a time: Newton iterations and
 factorizations are unaffected, seconds are then those of a shared machine.
 --baseline EXE adds the strategy "baseline": another compact binary (an
-earlier commit, built from a worktree) with its own default level solver.
+earlier commit, built from a worktree) with its own default level solver;
+--baseline-env VAR=VALUE ... sets its environment (for instance
+LD_LIBRARY_PATH=/usr/lib/x86_64-linux-gnu/blas:/usr/lib/x86_64-linux-gnu/lapack:
+the reference BLAS instead of OpenBLAS).
 
 Usage:
   /usr/bin/python3 scripts/bench_solver.py --scenes default
@@ -91,23 +94,28 @@ def scene_runs(a):
 def run_one(a, scene, label, ranks, opts, strategy):
     out = os.path.join(a.runs, f"{label}_" + "".join(c if c.isalnum() or c in "._" else "_" for c in strategy))
     os.makedirs(out, exist_ok=True)
+    env = None
     if strategy == "baseline":
         exe, solver = a.baseline, []
+        env = dict(os.environ, **dict(kv.split("=", 1) for kv in a.baseline_env))
     else:  # SOLVER[/POLICY][:OPTIONS]: -level_solver SOLVER [-load_step_policy POLICY] [OPTIONS]
         spec, _, options = strategy.partition(":")
         name, _, policy = spec.partition("/")
         exe, solver = a.exe, ["-level_solver", name] + (["-load_step_policy", policy] if policy else []) + options.split()
-    cmd = ([a.mpiexec, "--allow-run-as-root", "-n", str(ranks)] if ranks > 1 else []) + \
+    mpi = [a.mpiexec, "--allow-run-as-root", "-n", str(ranks)] if ranks > 1 else []
+    if env and mpi:
+        mpi += [x for kv in a.baseline_env for x in ("-x", kv.split("=", 1)[0])]
+    cmd = mpi + \
           [exe] + opts + solver + ["-output_dir", out, "-checkpoint", "false"] + a.extra.split()
     t0 = time.time()
     try:
-        p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=a.timeout)
+        p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=a.timeout, env=env)
         status, log = ("ok" if p.returncode == 0 else "failed"), p.stdout
     except subprocess.TimeoutExpired as e:
         status, log = "timeout", (e.stdout.decode() if isinstance(e.stdout, bytes) else (e.stdout or ""))
     wall = time.time() - t0
     with open(os.path.join(out, "log.txt"), "w") as f:
-        f.write(" ".join(cmd) + "\n" + log)
+        f.write(" ".join((["env"] + a.baseline_env if env else []) + cmd) + "\n" + log)
     rows = []
     curve = os.path.join(out, "curve.csv")
     if os.path.exists(curve):
@@ -192,6 +200,8 @@ def main():
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
     ap.add_argument("--exe", default=os.path.join(ROOT, "build", "bin", "compact"))
     ap.add_argument("--baseline", default="", help="compact binary of an earlier commit (strategy 'baseline')")
+    ap.add_argument("--baseline-env", nargs="*", default=[], metavar="VAR=VALUE",
+                    help="environment of the baseline runs (e.g. LD_LIBRARY_PATH of another BLAS)")
     ap.add_argument("--mpiexec", default="mpiexec")
     ap.add_argument("--extra", default="", help="extra compact options for every run")
     ap.add_argument("--runs", default=os.path.join(ROOT, "out", "bench_solver"))

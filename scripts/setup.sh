@@ -7,8 +7,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# libopenblas0-serial: the optimized BLAS behind MUMPS' dense kernels (Debian's
+# alternatives prefer it to the reference BLAS that petsc-dev pulls in); one
+# thread, so that MPI ranks and ctest -j 2 do not compete for the cores.
 packages=(g++ make cmake pkg-config petsc-dev libmetis-dev libhdf5-openmpi-dev openmpi-bin libopenmpi-dev
-          googletest libgtest-dev python3 python3-numpy python3-scipy python3-matplotlib python3-h5py)
+          libopenblas0-serial googletest libgtest-dev python3 python3-numpy python3-scipy python3-matplotlib python3-h5py)
 if [ "${1:-}" = "--tests" ]; then
   packages+=(python3-meshio)
 fi
