@@ -228,6 +228,21 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
     if (relaxed_tol > 0.0) phi = p_.PackingFraction();
     PetscFunctionReturn(0);
   };
+  // An accepted trial point becomes the iterate: its residual is the last
+  // one evaluated (the problem's contact data are those of the trial), so
+  // at_iterate's evaluation is taken over instead of repeated.
+  double trial_norm = INFINITY, trial_force = INFINITY;
+  bool trial_inverted = false;
+  const auto trial_to_iterate = [&]() -> PetscErrorCode {
+    PetscFunctionBeginUser;
+    PetscCall(VecCopy(zt_, z_));
+    PetscCall(VecCopy(Ft_, F_));
+    PetscCall(p_.AdoptState(z_));
+    fnorm = trial_norm, force = trial_force, inverted = trial_inverted;
+    phi_before = phi;
+    if (relaxed_tol > 0.0) phi = p_.PackingFraction();
+    PetscFunctionReturn(0);
+  };
   double move = prm_.initial_move;  // trust radius m, in <d>
   double rho = 0.0;
   const bool energy = prm_.merit == LevelMerit::Energy;
@@ -409,8 +424,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         // larger shift, which costs a factorization.
         for (int bt = 0; bt < kBacktracks && !accepted; ++bt) {
           const double alpha = alpha0 * std::ldexp(1.0, -bt);
-          double trial_norm, trial_force, trial_gnorm;
-          bool trial_inverted;
+          double trial_gnorm;
           PetscCall(VecAXPBY(s_, alpha, 0.0, d_));
           PetscCall(p_.RotatedUpdate(z_, s_, zt_));
           PetscCall(Evaluate(zt_, Ft_, &trial_norm, &trial_force, &trial_inverted));
@@ -463,10 +477,9 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
       }
       if (accepted) {
         rejections = 0;
-        PetscCall(VecCopy(zt_, z_));
         PetscCall(p_.ChangedStateMargin(active_before, &changed_margin));
         active_before = p_.ActiveSet();
-        PetscCall(at_iterate());
+        PetscCall(trial_to_iterate());
         // Pseudo-transient continuation with one Newton step per pseudo-time
         // step: the anchor moves to every accepted iterate, and the trust
         // radius grows after every accepted step.
