@@ -402,7 +402,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
       }
       if (ok) {
         PetscCall(VecScale(d_, -1.0));  // (J + rho D) d = -G
-        // Step fraction: open contacts not driven deep into penetration, and
+        // Step fraction: open and touching contacts not driven deep into penetration, and
         // no body moving (or turning, times its radius) more than m <d> in
         // one step: the shift alone does not bound a mode whose force is far
         // below |F|_inf.

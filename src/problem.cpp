@@ -942,12 +942,21 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscBool is_lu = PETSC_FALSE, icntl14_set = PETSC_FALSE;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCLU, &is_lu));
   if (is_lu) PetscCall(PCFactorGetMatSolverType(pc, &solver_type));
+  // No scaling (ICNTL(8) = 0) unless -mat_mumps_icntl_8 says otherwise: the
+  // rows are in the units of E already (NCP rows scaled by c_n = ncp_scale E,
+  // gauge rows by E / R, shifts by the weights D), and MUMPS's scaling,
+  // recomputed at every numeric factorization, took 8 % of a 50-disk run
+  // (perf) without changing its Newton iterations or phi
+  // (docs/level-solver.md, "Measured: the cost of an iteration").
+  PetscBool icntl8_set = PETSC_FALSE;
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_14", &icntl14_set));
-  if (is_lu && solver_type && std::string(solver_type) == MATSOLVERMUMPS && !icntl14_set) {
+  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_8", &icntl8_set));
+  if (is_lu && solver_type && std::string(solver_type) == MATSOLVERMUMPS) {
     Mat factor;
     PetscCall(PCFactorSetUpMatSolverType(pc));
     PetscCall(PCFactorGetMatrix(pc, &factor));
-    PetscCall(MatMumpsSetIcntl(factor, 14, mumps_extra_));
+    if (!icntl14_set) PetscCall(MatMumpsSetIcntl(factor, 14, mumps_extra_));
+    if (!icntl8_set) PetscCall(MatMumpsSetIcntl(factor, 8, 0));
   }
   PetscFunctionReturn(0);
 }

@@ -12,8 +12,10 @@
 //   unbalanced force moves by about m_k <d>, so rattlers, free rotations and
 //   rearranging particles (zero or negative curvature) take bounded steps,
 //   and rho_k vanishes with F, so the last iterations are plain semismooth
-//   Newton steps. The step is d shortened so that no open contact is driven
-//   deep into penetration and no body moves more than m_k <d>, applied with
+//   Newton steps. The step is d shortened so that no open or touching contact
+//   is driven deeper than 1e-3 <d> into penetration (a cut continuous in the
+//   gap, so round-off of either sign at a touching contact takes the same
+//   step) and no body moves more than m_k <d>, applied with
 //   the finite rotation of each deformable body (RotatedUpdate).
 //   The merit is the residual of the proximal subproblem anchored at z_k,
 //       G_k(z) = F(z) + rho_k D (z - z_k),
