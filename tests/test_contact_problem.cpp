@@ -391,6 +391,20 @@ PetscInt FindUnknown(const CompactionProblem &problem, Vec z, const std::string 
   return -1;
 }
 
+// A rigid disk of diameter 1 touching the four walls of a box of side 1:
+// its layout vectors and its x unknown (-1 if setting up failed).
+void RigidDiskInBox(const ProblemParameters &params, CompactionProblem &problem, Vec *z, Vec *F, PetscInt *x_dof) {
+  *x_dof = -1;
+  if (problem.SetParameters(params)) return;
+  problem.AddRigidBody(0.0, 0.0, kRadius);
+  const double walls[4] = {-kRadius, kRadius, -kRadius, kRadius};
+  problem.SetWalls(walls);
+  Mat J;
+  KSP ksp;
+  if (problem.RefreshCandidates() || problem.Layout(z, F, &J, &ksp)) return;
+  *x_dof = FindUnknown(problem, *z, "rigid particle 0 dof 0");
+}
+
 // The contact part of newton's energy merit (ContactPenalty): a rigid disk
 // of diameter 1 in a box of side 1, moved by delta towards the right wall,
 // overlaps it by exactly delta and leaves the left wall by delta; the
@@ -402,16 +416,9 @@ TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
   ProblemParameters params;
   params.friction = 0.2;
   CompactionProblem problem(PETSC_COMM_WORLD);
-  ASSERT_PETSC(problem.SetParameters(params));
-  problem.AddRigidBody(0.0, 0.0, kRadius);
-  const double walls[4] = {-kRadius, kRadius, -kRadius, kRadius};
-  problem.SetWalls(walls);
-  ASSERT_PETSC(problem.RefreshCandidates());
   Vec z, F;
-  Mat J;
-  KSP ksp;
-  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
-  const PetscInt x_dof = FindUnknown(problem, z, "rigid particle 0 dof 0");
+  PetscInt x_dof = -1;
+  RigidDiskInBox(params, problem, &z, &F, &x_dof);
   ASSERT_GE(x_dof, 0);
   ASSERT_EQ(problem.Sizes().normal, 4) << "the four wall contacts";
   Vec zt;
@@ -441,16 +448,9 @@ TEST(ContactProblem, EnergyMeritPenaltyMeasuresPenetrationAndDissipation) {
 TEST(ContactProblem, StepFractionIsContinuousAtTouch) {
   ProblemParameters params;
   CompactionProblem problem(PETSC_COMM_WORLD);
-  ASSERT_PETSC(problem.SetParameters(params));
-  problem.AddRigidBody(0.0, 0.0, kRadius);
-  const double walls[4] = {-kRadius, kRadius, -kRadius, kRadius};
-  problem.SetWalls(walls);
-  ASSERT_PETSC(problem.RefreshCandidates());
   Vec z, F;
-  Mat J;
-  KSP ksp;
-  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
-  const PetscInt x_dof = FindUnknown(problem, z, "rigid particle 0 dof 0");
+  PetscInt x_dof = -1;
+  RigidDiskInBox(params, problem, &z, &F, &x_dof);
   ASSERT_GE(x_dof, 0);
   const double overshoot = CompactionProblem::kOpenOvershoot * problem.MeanDiameter();
   Vec zt, dz;
