@@ -220,12 +220,17 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
   double fnorm, force, phi = 0.0, phi_before = 0.0;
   bool inverted;
   // The iterate z: its residual F(z), and phi for the level criterion.
-  const auto at_iterate = [&]() -> PetscErrorCode {
+  const auto adopt = [&]() -> PetscErrorCode {
     PetscFunctionBeginUser;
     PetscCall(p_.AdoptState(z_));
-    PetscCall(Evaluate(z_, F_, &fnorm, &force, &inverted));
     phi_before = phi;
     if (relaxed_tol > 0.0) phi = p_.PackingFraction();
+    PetscFunctionReturn(0);
+  };
+  const auto at_iterate = [&]() -> PetscErrorCode {
+    PetscFunctionBeginUser;
+    PetscCall(adopt());
+    PetscCall(Evaluate(z_, F_, &fnorm, &force, &inverted));
     PetscFunctionReturn(0);
   };
   // An accepted trial point becomes the iterate: its residual is the last
@@ -237,10 +242,8 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
     PetscFunctionBeginUser;
     PetscCall(VecCopy(zt_, z_));
     PetscCall(VecCopy(Ft_, F_));
-    PetscCall(p_.AdoptState(z_));
+    PetscCall(adopt());
     fnorm = trial_norm, force = trial_force, inverted = trial_inverted;
-    phi_before = phi;
-    if (relaxed_tol > 0.0) phi = p_.PackingFraction();
     PetscFunctionReturn(0);
   };
   double move = prm_.initial_move;  // trust radius m, in <d>

@@ -541,8 +541,8 @@ TEST(Mixture, PredictionOverlapLimit) {
   EXPECT_LT(loose_overlap, 0.1);
   // How much closer depends on the tangent's active set at the edges of the
   // contact patches, where nodes touch without force (g = lambda = 0 to
-  // round-off): measured 0.33 and 0.53 of the last state's distance with
-  // first derivatives of the gap by AD and in closed form.
+  // round-off), so on the round-off of the contact derivatives: 0.33 to 0.53
+  // of the last state's distance measured.
   EXPECT_LT(distance(loose), 0.75 * distance(last)) << "the admitted prediction is closer to the equilibrium";
   EXPECT_LT(tight_overlap, CompactionProblem::kPredictionOverlap);
   EXPECT_EQ(distance(tight), distance(last)) << "under the tight limit the prediction is given up";
