@@ -5,7 +5,7 @@
 
 namespace deformix {
 
-NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n) {
+NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n, double tie) {
   NormalNcp r;
   const double cg = c_n * gap;
   r.switch_margin = std::abs(lambda - cg);
@@ -13,7 +13,7 @@ NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n) {
     // A tie (lambda = c_n g, e.g. a closed contact carrying no force yet) is
     // treated as active so that a touching wall is coupled to the body in the
     // first Newton step of a load increment.
-    r.active = lambda - cg >= 0.0;
+    r.active = lambda - cg >= -tie;
     if (r.active) {
       r.value = cg;
       r.d_gap = c_n;

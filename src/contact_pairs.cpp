@@ -142,6 +142,7 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
   // the indeterminate part at its current value and, like rho, never enters
   // the residual.
   const double dual_reg = params_.prox_eta;
+  if (values) jacobian_rows_.assign(2 * candidates_.size(), 0);
   LocalContact lc;
   for (size_t c = 0; c < candidates_.size(); ++c) {
     if (CandidateOwner(candidates_[c]) != rank_) continue;
@@ -151,7 +152,7 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
     ContactGeometry(candidates_[c], z, &lc, values && (lam_n != 0.0 || lam_t != 0.0));
     const PairKinematics &k = lc.k;
     const int nd = k.ndof;
-    NormalNcp ncp = normal_ncp(ncp_now_, lam_n, k.gap, c_n);
+    NormalNcp ncp = normal_ncp(ncp_now_, lam_n, k.gap, c_n, kTouchingGap * mean_diameter_ * c_n);
     if (barrier_mu_ > 0.0) {
       // The barrier row of SetBarrier: lambda - mu psi(s) with its primal-dual
       // Newton row (-lambda psi'(s) / psi(s)) ds + d lambda.
@@ -183,6 +184,15 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
       if (lt_dof >= 0) F[lt_dof] += tan.value;
     }
     if (!need_K) continue;
+    if (values) {
+      // What SymmetrizeNewtonMatrix may do with the rows (problem.hpp).
+      const bool identity_n = ncp.d_gap == 0.0 && ncp.d_lambda == 1.0;
+      const bool scaled_n = barrier_mu_ == 0.0 && ncp_now_ == NcpFunction::Min && ncp.d_lambda == 0.0;
+      jacobian_rows_[2 * c] = identity_n ? 1 : scaled_n ? 2 : 3;
+      if (lt_dof >= 0)
+        jacobian_rows_[2 * c + 1] =
+            tan.d_gap == 0.0 && tan.d_slip == 0.0 && tan.d_lambda_n == 0.0 && tan.d_lambda_t == 1.0 ? 1 : 3;
+    }
     if (lc.curved)
       for (int a = 0; a < nd; ++a)
         for (int b = 0; b < nd; ++b)

@@ -41,6 +41,10 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "newton: trust radius at the start of a load step (largest move of a body under the "
                              "largest unbalanced force, in mean diameters)",
                              "", initial_move, &initial_move, nullptr));
+  PetscCall(PetscOptionsBool("-level_ldlt",
+                             "newton (auto's levels without friction): factor the Newton matrix, made symmetric by row "
+                             "operations that keep its solution, by MUMPS LDL^T (false: LU)",
+                             "", ldlt, &ldlt, nullptr));
   PetscCall(PetscOptionsBool("-level_monitor",
                              "newton: one line per trial step (|F|, merit |G| before and after, largest force, trust "
                              "radius, shift, step fraction and length, accepted or rejected, closed and sliding contacts, "
@@ -140,7 +144,8 @@ class MeritNewton {
   PetscErrorCode Attach();            // the problem's layout objects, and our work vectors for them
   PetscErrorCode Destroy();
   PetscErrorCode Evaluate(Vec z, Vec F, double *norm, double *force, bool *inverted);
-  PetscErrorCode Factor(double rho, bool *ok, bool *out_of_memory, PCFailedReason *reason);  // (J + floor + rho D) in the KSP
+  // (J + floor + rho D) in ksp
+  PetscErrorCode Factor(KSP ksp, double rho, bool *ok, bool *out_of_memory, PCFailedReason *reason);
 
   CompactionProblem &p_;
   const LevelSolverParameters &prm_;
@@ -152,6 +157,8 @@ class MeritNewton {
   Vec d_ = nullptr, s_ = nullptr, zt_ = nullptr, Ft_ = nullptr, floor_ = nullptr, weight_ = nullptr, sqrt_weight_ = nullptr,
       work_ = nullptr;
   Vec body_mask_ = nullptr;  // 1 on the body and wall rows (the shifted ones), 0 elsewhere
+  KSP ksp_ldlt_ = nullptr;   // the problem's LDL^T of the symmetric form (prm_.ldlt)
+  Vec rhs_ = nullptr;        // the symmetric form's right-hand side
   double rho_in_matrix_ = 0.0;
   int layouts_ = -1;
   MPI_Comm comm_ = MPI_COMM_NULL;
@@ -159,7 +166,7 @@ class MeritNewton {
 
 PetscErrorCode MeritNewton::Destroy() {
   PetscFunctionBeginUser;
-  PetscCall(DestroyAll({&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_, &body_mask_}));
+  PetscCall(DestroyAll({&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_, &body_mask_, &rhs_}));
   PetscFunctionReturn(0);
 }
 
@@ -170,7 +177,9 @@ PetscErrorCode MeritNewton::Attach() {
   layouts_ = p_.LayoutsCreated();
   PetscCall(Destroy());
   PetscCall(PetscObjectGetComm((PetscObject)z_, &comm_));
-  PetscCall(DuplicateAll(z_, {&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_, &body_mask_}));
+  PetscCall(DuplicateAll(z_, {&d_, &za_, &G_, &Gt_, &s_, &sqrt_weight_, &zt_, &Ft_, &floor_, &weight_, &work_, &body_mask_, &rhs_}));
+  ksp_ldlt_ = nullptr;
+  if (prm_.ldlt) PetscCall(p_.SymmetricKsp(&ksp_ldlt_));
   PetscCall(p_.ShiftDiagonals(floor_, weight_));
   {
     PetscScalar *m;
@@ -198,9 +207,9 @@ PetscErrorCode MeritNewton::Evaluate(Vec z, Vec F, double *norm, double *force, 
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode MeritNewton::Factor(double rho, bool *ok, bool *out_of_memory, PCFailedReason *reason) {
+PetscErrorCode MeritNewton::Factor(KSP ksp, double rho, bool *ok, bool *out_of_memory, PCFailedReason *reason) {
   PetscFunctionBeginUser;
-  PetscCall(FactorShifted(J_, ksp_, weight_, work_, rho, &rho_in_matrix_, ok, out_of_memory, reason));
+  PetscCall(FactorShifted(J_, ksp, weight_, work_, rho, &rho_in_matrix_, ok, out_of_memory, reason));
   PetscFunctionReturn(0);
 }
 
@@ -352,19 +361,30 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
     // element is inverted (a start state handed over folded): there the
     // step is tested on |G| alone, which does not need descent of the energy.
     const bool energy_step = energy && !inverted;
-    PetscCall(p_.NewtonMatrix(z_, J_));
-    rho_in_matrix_ = 0.0;
+    // The symmetric form (LDL^T) where it applies, else LU.
+    bool symmetric = false;
+    const auto linearize = [&]() -> PetscErrorCode {
+      PetscFunctionBeginUser;
+      PetscCall(p_.NewtonMatrix(z_, J_));
+      rho_in_matrix_ = 0.0;
+      symmetric = false;
+      if (ksp_ldlt_) PetscCall(p_.SymmetrizeNewtonMatrix(J_, &symmetric));
+      PetscFunctionReturn(0);
+    };
+    PetscCall(linearize());
     ++report->newton_its;
     bool accepted = false;
     while (!accepted) {
       bool ok = false, out_of_memory = false;
       PCFailedReason pc_reason = PC_NOERROR;
-      PetscCall(Factor(rho, &ok, &out_of_memory, &pc_reason));
+      KSP ksp = symmetric ? ksp_ldlt_ : ksp_;
+      PetscCall(Factor(ksp, rho, &ok, &out_of_memory, &pc_reason));
       ++report->factorizations;
       if (ok) {
         KSPConvergedReason kreason;
-        PetscCall(KSPSolve(ksp_, G_, d_));
-        PetscCall(KSPGetConvergedReason(ksp_, &kreason));
+        if (symmetric) PetscCall(p_.SymmetricRhs(G_, rhs_));
+        PetscCall(KSPSolve(ksp, symmetric ? rhs_ : G_, d_));
+        PetscCall(KSPGetConvergedReason(ksp, &kreason));
         ok = kreason > 0;
       }
       bool negative_curvature = false;
@@ -395,8 +415,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
           PetscCall(at_iterate());
           PetscCall(anchor());
           gnorm = fnorm;
-          PetscCall(p_.NewtonMatrix(z_, J_));
-          rho_in_matrix_ = 0.0;
+          PetscCall(linearize());
           continue;
         }
         if (prm_.monitor)

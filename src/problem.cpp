@@ -793,6 +793,9 @@ PetscErrorCode CompactionProblem::ContactStepFraction(Vec dz, double *fraction) 
 PetscErrorCode CompactionProblem::DestroySolver() {
   PetscFunctionBeginUser;
   PetscCall(KSPDestroy(&ksp_));
+  PetscCall(KSPDestroy(&ksp_ldlt_));
+  PetscCall(MatDestroy(&J_unsymmetric_));
+  for (Vec *v : {&sym_scale_, &sym_pivot_, &sym_keep_, &sym_work_}) PetscCall(VecDestroy(v));
   PetscCall(MatDestroy(&J_));
   PetscCall(VecDestroy(&z_));
   PetscCall(VecDestroy(&r_));
@@ -934,14 +937,23 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscCall(PCSetType(pc, PCLU));
   PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
   PetscCall(KSPSetFromOptions(ksp_));
+  PetscCall(ConfigureMumps(ksp_));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::ConfigureMumps(KSP ksp) {
+  PC pc;
+  PetscFunctionBeginUser;
+  PetscCall(KSPGetPC(ksp, &pc));
   // Contact saddle points need numerical pivoting, and MUMPS' workspace
   // estimate (made before pivoting) is then often too small (INFOG(1) = -9):
   // reserve mumps_extra_ % more (100 at first, doubled after each such
   // failure, see GrowFactorWorkspace) unless -mat_mumps_icntl_14 says otherwise.
   MatSolverType solver_type = nullptr;
-  PetscBool is_lu = PETSC_FALSE, icntl14_set = PETSC_FALSE;
+  PetscBool is_lu = PETSC_FALSE, is_cholesky = PETSC_FALSE, icntl14_set = PETSC_FALSE;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCLU, &is_lu));
-  if (is_lu) PetscCall(PCFactorGetMatSolverType(pc, &solver_type));
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &is_cholesky));
+  if (is_lu || is_cholesky) PetscCall(PCFactorGetMatSolverType(pc, &solver_type));
   // No scaling (ICNTL(8) = 0) unless -mat_mumps_icntl_8 says otherwise: the
   // rows are in the units of E already (NCP rows scaled by c_n = ncp_scale E,
   // gauge rows by E / R, shifts by the weights D), and MUMPS's scaling,
@@ -951,7 +963,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   PetscBool icntl8_set = PETSC_FALSE;
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_14", &icntl14_set));
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_8", &icntl8_set));
-  if (is_lu && solver_type && std::string(solver_type) == MATSOLVERMUMPS) {
+  if (solver_type && std::string(solver_type) == MATSOLVERMUMPS) {
     Mat factor;
     PetscCall(PCFactorSetUpMatSolverType(pc));
     PetscCall(PCFactorGetMatrix(pc, &factor));

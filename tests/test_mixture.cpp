@@ -16,6 +16,8 @@
 //     Signorini, Coulomb, level criterion and virial check.
 //  6. A rearrangement: a rigid rattler in the pore of four deformable disks
 //     is caught when the pore closes, and ends in exact equilibrium.
+//  7. The symmetric form of the Newton matrix: symmetric, and its LDL^T
+//     gives LU's step.
 #include <gtest/gtest.h>
 #include <petscsnes.h>
 
@@ -241,6 +243,24 @@ TEST(CoulombLaw, StickSlipAndOpenBranches) {
   EXPECT_DOUBLE_EQ(off.value, 0.0);
   EXPECT_DOUBLE_EQ(off.d_slip, 0.0);
   EXPECT_DOUBLE_EQ(off.d_lambda_t, 1.0);
+}
+
+// The min NCP row of a touching contact without force: with the tie band
+// it is the closed row whatever the sign of the gap's round-off; without it
+// the sign decides (the rank dependence the band removes); a gap beyond the
+// band, or a contact pulling apart, is open.
+TEST(CoulombLaw, TouchingContactTakesTheClosedRowWhateverItsRoundOff) {
+  const double c = 1e-2, tie = 1e-12 * c;  // c_n, and the band of a gap of 1e-12 <d> (<d> = 1)
+  for (double g : {-1e-16, 0.0, 1e-16, 9e-13}) {
+    const NormalNcp with_band = normal_ncp(NcpFunction::Min, 0.0, g, c, tie);
+    EXPECT_TRUE(with_band.active) << "gap " << g;
+    EXPECT_EQ(with_band.d_gap, c) << "gap " << g;
+    EXPECT_EQ(with_band.d_lambda, 0.0) << "gap " << g;
+  }
+  EXPECT_TRUE(normal_ncp(NcpFunction::Min, 0.0, -1e-16, c).active);
+  EXPECT_FALSE(normal_ncp(NcpFunction::Min, 0.0, 1e-16, c).active) << "without the band the round-off decides";
+  EXPECT_FALSE(normal_ncp(NcpFunction::Min, 0.0, 2e-12, c, tie).active) << "open beyond the band";
+  EXPECT_FALSE(normal_ncp(NcpFunction::Min, -1e-13, 0.0, c, tie).active) << "a tensile multiplier beyond the band opens";
 }
 
 // Margins of the state switches and the degenerate-flip measure of the
@@ -496,6 +516,99 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
   EXPECT_NEAR(carried_by[2], carried_by[1], 1e-6 * carried_by[1]) << "interior and anchored reach the same equilibrium";
   EXPECT_NEAR(carried_by[3], carried_by[1], 1e-6 * carried_by[1]) << "hybrid and anchored reach the same equilibrium";
   EXPECT_NEAR(carried_by[4], carried_by[1], 1e-6 * carried_by[1]) << "newton's energy merit and anchored reach the same equilibrium";
+}
+
+// The symmetric form of the Newton matrix (problem.hpp, SymmetrizeNewtonMatrix):
+// a frictionless random 20-disk mixture (mortar, rotation gauges) converged
+// at P/E 1e-4, then the first linearization of the load step to 2e-4, which
+// has closed and open contacts and gauge rows. J_s is symmetric where J is
+// not, and MUMPS LDL^T of J_s with S L b gives the step of MUMPS LU of J
+// with b, for a right-hand side with every entry nonzero.
+TEST(Mixture, SymmetricFormHasTheSolutionOfTheNewtonMatrix) {
+  DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
+  assign_deformable(packing, 0.5, 1);
+  ProblemParameters p;
+  p.deformable_contact = DeformableContact::Mortar;
+  p.friction = 0.0;
+  p.constrain_rotation = PETSC_TRUE;
+  p.level_force_rtol = 1e-4;
+  CompactionProblem problem(PETSC_COMM_WORLD);
+  ASSERT_PETSC(problem.SetParameters(p));
+  ASSERT_GT(problem.AddPacking(packing, make_disk_mesh(1.0, 92, 2)), 0);
+  LoadControlParameters load;
+  double step = -1.0;
+  LevelReport rep;
+  ASSERT_PETSC(AdvanceToPressure(problem, load, 1e-4, &step, &rep));
+  ASSERT_PETSC(problem.BeginLoadStep(2e-4));
+  Vec z, F, b, d_lu, bs, d_ldlt;
+  Mat J, J_lu;
+  KSP ksp, ksp_ldlt;
+  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
+  ASSERT_PETSC(problem.Residual(z, F));
+  int closed = 0, open = 0;
+  for (char a : problem.ActiveSet()) closed += a == kClosed, open += a == kOpen;
+  std::printf("  %d closed and %d open contacts\n", closed, open);
+  ASSERT_GT(closed, 0);
+  ASSERT_GT(open, 0);
+  ASSERT_PETSC(problem.NewtonMatrix(z, J));
+  ASSERT_PETSC(MatDuplicate(J, MAT_COPY_VALUES, &J_lu));
+  bool done = false;
+  ASSERT_PETSC(problem.SymmetrizeNewtonMatrix(J, &done));
+  ASSERT_TRUE(done);
+  PetscReal jmax;
+  ASSERT_PETSC(MatNorm(J_lu, NORM_INFINITY, &jmax));
+  // Largest |A - A^T| (MatIsSymmetric also compares the nonzero patterns,
+  // which differ where an entry is structurally present on one side only).
+  const auto asymmetry = [](Mat A) {
+    Mat T, D;
+    PetscReal norm = -1.0;
+    if (MatTranspose(A, MAT_INITIAL_MATRIX, &T) || MatDuplicate(A, MAT_COPY_VALUES, &D)) return norm;
+    if (!MatAXPY(D, -1.0, T, DIFFERENT_NONZERO_PATTERN)) MatNorm(D, NORM_MAX, &norm);
+    MatDestroy(&T), MatDestroy(&D);
+    return norm;
+  };
+  const PetscReal asym_s = asymmetry(J), asym = asymmetry(J_lu);
+  std::printf("  largest |J - J^T| %.2e, |J_s - J_s^T| %.2e, of |J|_inf %.2e\n", asym, asym_s, jmax);
+  EXPECT_LE(asym_s, 1e-13 * jmax) << "J_s is symmetric";
+  EXPECT_GT(asym, 1e-3 * jmax) << "J itself is not (the test sees a difference)";
+  // The level solvers shift the body and wall rows (rho D): here rho = 1e-3 E.
+  {
+    Vec floor, weight;
+    ASSERT_PETSC(VecDuplicate(z, &floor));
+    ASSERT_PETSC(VecDuplicate(z, &weight));
+    ASSERT_PETSC(problem.ShiftDiagonals(floor, weight));
+    ASSERT_PETSC(VecScale(weight, 1e-3));
+    ASSERT_PETSC(MatDiagonalSet(J, weight, ADD_VALUES));
+    ASSERT_PETSC(MatDiagonalSet(J_lu, weight, ADD_VALUES));
+    VecDestroy(&floor), VecDestroy(&weight);
+  }
+  ASSERT_PETSC(VecDuplicate(z, &b));
+  ASSERT_PETSC(VecDuplicate(z, &bs));
+  ASSERT_PETSC(VecDuplicate(z, &d_lu));
+  ASSERT_PETSC(VecDuplicate(z, &d_ldlt));
+  {
+    PetscInt lo, hi;
+    PetscScalar *a;
+    ASSERT_PETSC(VecGetOwnershipRange(b, &lo, &hi));
+    ASSERT_PETSC(VecGetArray(b, &a));
+    for (PetscInt i = lo; i < hi; ++i) a[i - lo] = 1e-4 * std::sin(0.7 * static_cast<double>(i) + 0.3);
+    ASSERT_PETSC(VecRestoreArray(b, &a));
+  }
+  ASSERT_PETSC(KSPSetOperators(ksp, J_lu, J_lu));
+  ASSERT_PETSC(KSPSolve(ksp, b, d_lu));
+  ASSERT_PETSC(problem.SymmetricKsp(&ksp_ldlt));
+  ASSERT_PETSC(KSPSetOperators(ksp_ldlt, J, J));
+  ASSERT_PETSC(problem.SymmetricRhs(b, bs));
+  ASSERT_PETSC(KSPSolve(ksp_ldlt, bs, d_ldlt));
+  PetscReal norm, diff;
+  ASSERT_PETSC(VecNorm(d_lu, NORM_INFINITY, &norm));
+  ASSERT_PETSC(VecAXPY(d_ldlt, -1.0, d_lu));
+  ASSERT_PETSC(VecNorm(d_ldlt, NORM_INFINITY, &diff));
+  std::printf("  |d_LDLT - d_LU|_inf = %.2e of %.2e\n", diff, norm);
+  EXPECT_LE(diff, 1e-8 * norm);
+  ASSERT_PETSC(KSPSetOperators(ksp, J, J));
+  for (Vec *v : {&b, &bs, &d_lu, &d_ldlt}) VecDestroy(v);
+  MatDestroy(&J_lu);
 }
 
 // The overlap limit of a predicted state (BeginLoadStep). Four frictionless

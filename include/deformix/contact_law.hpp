@@ -52,7 +52,12 @@ struct NormalNcp {
   double switch_margin = 0.0;  // |lambda - c_n g|: how far the state is from switching
 };
 
-NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n);
+// tie (>= 0, force units): the min function's rows count as active down to
+// lambda - c_n g = -tie, so that a touching contact without force (lambda =
+// 0, g at round-off of 0, as the rigid settling leaves the contacts of
+// disks that become deformable) takes the same row whatever the sign of its
+// round-off (which depends on the number of ranks and the factorization).
+NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n, double tie = 0.0);
 
 // Clamped log barrier of the interior level solver (interior_point.hpp), in
 // the form of IPC's (Li et al., ACM TOG 39, 2020), scaled to behave as

@@ -114,6 +114,7 @@ struct LevelSolverParameters {
   PetscInt attempt_its = 30;  // hybrid: linearizations of the newton attempt
   LevelMerit merit = LevelMerit::Residual;  // newton (and hybrid's attempt): -level_merit
   double initial_move = 0.1;  // trust radius m at the start of a load step, in <d>
+  PetscBool ldlt = PETSC_TRUE;  // newton on levels without friction: MUMPS LDL^T of the symmetric form (-level_ldlt)
   PetscBool monitor = PETSC_FALSE;  // -level_monitor: one line per Newton iteration
   SNESLineSearchType line_search = SNESLINESEARCHBT;  // anchored: the SNES line search (-snes_linesearch_type overrides)
   PetscBool body_criterion = PETSC_TRUE;   // anchored: the level criterion per body too (-level_body_criterion)

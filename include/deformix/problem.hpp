@@ -253,6 +253,9 @@ class CompactionProblem {
   // <d> (ContactStepFraction): the next linearization closes it. The energy
   // merit penalizes only penetration beyond it (ContactPenalty).
   static constexpr double kOpenOvershoot = 1e-3;
+  // Gaps within this many <d> of zero are round-off of a touching contact:
+  // a contact without force there has the row of a closed one (normal_ncp's tie).
+  static constexpr double kTouchingGap = 1e-12;
   // A state the first Newton step of a load step can start from: no element
   // inverted, no overlap deeper than overlap_limit <d> (BeginLoadStep).
   bool PredictionAdmissible(double overlap_limit) const;
@@ -457,6 +460,29 @@ class CompactionProblem {
   double ProximalDiagonal(PetscInt i) const;
   // Contact states (0 open, 1 closed/stick, 2 sliding) at the last residual evaluation.
   const std::vector<char> &ActiveSet() const { return active_now_; }
+
+  // ---- The symmetric form of the Newton matrix (symmetric_newton.cpp). ----
+  // Without friction and with the min NCP rows, the Newton matrix J of
+  // NewtonMatrix is symmetric up to its multiplier rows: an active normal
+  // row reads c_n dg (its column in the body rows -dg), an inactive one
+  // d lambda = -lambda (its column still -dg), a rotation gauge row
+  // (E / R) G (its column -G). Row operations that keep the solution make it
+  // symmetric: the inactive multipliers' steps are known, so their columns
+  // move to the right-hand side (L), and active and gauge rows are scaled by
+  // -1 / c_n and -R / E (S):
+  //     J_s = S L J,  J_s d = S L b  <=>  J d = b,
+  // with the body and wall block, and so the curvature of any step, unchanged.
+  // J_s is factored by MUMPS LDL^T (SymmetricKsp), half the flops of LU.
+  // SymmetrizeNewtonMatrix turns J (NewtonMatrix's, not yet shifted) into
+  // J_s and keeps what SymmetricRhs needs; *done is false, and J unchanged,
+  // where the form does not apply (friction acting, Fischer-Burmeister or
+  // barrier rows). Collective.
+  PetscErrorCode SymmetrizeNewtonMatrix(Mat J, bool *done);
+  // bs = S L b for the last SymmetrizeNewtonMatrix.
+  PetscErrorCode SymmetricRhs(Vec b, Vec bs);
+  // A KSP with MUMPS LDL^T (PCCHOLESKY, MUMPS SYM = 2) on the Newton matrix
+  // of Layout, for J_s (options prefix: the problem's then "ldlt_").
+  PetscErrorCode SymmetricKsp(KSP *ksp);
   // Rank owning each particle (empty on one rank: everything is rank 0's); PETSc index of a natural unknown.
   const std::vector<int> &ParticleOwners() const { return particle_owner_; }
   PetscInt PetscIndex(PetscInt natural) const { return petsc_of_[natural]; }
@@ -481,6 +507,7 @@ class CompactionProblem {
   PetscErrorCode FormResidual(Vec z, Vec F);
   PetscErrorCode FormJacobian(Vec z, Mat J);
   PetscErrorCode DestroySolver();
+  PetscErrorCode ConfigureMumps(KSP ksp);  // ICNTL(14) and ICNTL(8) of a MUMPS factor (SetUpLayout)
   PetscErrorCode Gather(Vec z, bool full);  // z -> zall_ (natural order): everything, or own + ghost unknowns
   PetscErrorCode Assemble(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
                           std::vector<PetscScalar> *cv, bool *inverted, std::vector<char> *active);
@@ -543,6 +570,17 @@ class CompactionProblem {
   bool partition_adopted_ = false;  // the last UpdatePartition changed the owners (-partition_view reports)
   Mat J_ = nullptr;
   KSP ksp_ = nullptr;                // MUMPS LU (default) of the Newton matrix
+  // The symmetric form (SymmetrizeNewtonMatrix), for the current layout.
+  KSP ksp_ldlt_ = nullptr;           // MUMPS LDL^T of J_s
+  Mat J_unsymmetric_ = nullptr;      // J before the row operations (its inactive columns)
+  Vec sym_scale_ = nullptr;          // S: -1 / c_n on active normal rows, -R / E on gauge rows, else 1
+  Vec sym_pivot_ = nullptr;          // 1 / pivot on the rows whose columns were moved (inactive multipliers), else 0
+  Vec sym_keep_ = nullptr;           // 0 on those rows, else 1
+  Vec sym_work_ = nullptr;
+  // Per candidate {normal, tangential}: the Newton row of the last Jacobian
+  // assembly is the identity row of an inactive multiplier (1), an active
+  // normal row c_n dg (2), anything else (3), or not this rank's (0).
+  std::vector<char> jacobian_rows_;
   std::vector<char> active_now_;
   std::vector<double> switch_margin_;  // per candidate: |lambda_n - c_n g| and ||trial| - mu a| (own contacts; see ChangedStateMargin)
   std::vector<double> gap_bound_;      // per candidate, at the last residual: gap and sum_a |dgap_a| (own contacts; see ContactStepFraction)
