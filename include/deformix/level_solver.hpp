@@ -12,7 +12,9 @@
 //   unbalanced force moves by about m_k <d>, so rattlers, free rotations and
 //   rearranging particles (zero or negative curvature) take bounded steps,
 //   and rho_k vanishes with F, so the last iterations are plain semismooth
-//   Newton steps. The step is d shortened so that no open or touching contact
+//   Newton steps. Without friction acting, J + rho_k D is factored by MUMPS
+//   LDL^T of its symmetric form (CompactionProblem::SymmetrizeNewtonMatrix,
+//   -level_ldlt), else by LU. The step is d shortened so that no open or touching contact
 //   is driven deeper than 1e-3 <d> into penetration (a cut continuous in the
 //   gap, so round-off of either sign at a touching contact takes the same
 //   step) and no body moves more than m_k <d>, applied with
