@@ -928,23 +928,22 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
 
   // The Newton matrix is factored by MUMPS LU unless the options say
   // otherwise (-ksp_type, -pc_type, -pc_factor_mat_solver_type).
-  PetscCall(KSPCreate(comm_, &ksp_));
-  if (!options_prefix_.empty()) PetscCall(KSPSetOptionsPrefix(ksp_, options_prefix_.c_str()));
-  PetscCall(KSPSetOperators(ksp_, J_, J_));
-  PetscCall(KSPSetType(ksp_, KSPPREONLY));
-  PC pc;
-  PetscCall(KSPGetPC(ksp_, &pc));
-  PetscCall(PCSetType(pc, PCLU));
-  PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
-  PetscCall(KSPSetFromOptions(ksp_));
-  PetscCall(ConfigureMumps(ksp_));
+  PetscCall(CreateFactorKsp(PCLU, "", &ksp_));
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode CompactionProblem::ConfigureMumps(KSP ksp) {
+PetscErrorCode CompactionProblem::CreateFactorKsp(PCType factor, const char *prefix, KSP *ksp) {
   PC pc;
   PetscFunctionBeginUser;
-  PetscCall(KSPGetPC(ksp, &pc));
+  PetscCall(KSPCreate(comm_, ksp));
+  PetscCall(KSPSetOptionsPrefix(*ksp, options_prefix_.c_str()));
+  PetscCall(KSPAppendOptionsPrefix(*ksp, prefix));
+  PetscCall(KSPSetOperators(*ksp, J_, J_));
+  PetscCall(KSPSetType(*ksp, KSPPREONLY));
+  PetscCall(KSPGetPC(*ksp, &pc));
+  PetscCall(PCSetType(pc, factor));
+  PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+  PetscCall(KSPSetFromOptions(*ksp));
   // Contact saddle points need numerical pivoting, and MUMPS' workspace
   // estimate (made before pivoting) is then often too small (INFOG(1) = -9):
   // reserve mumps_extra_ % more (100 at first, doubled after each such
@@ -964,11 +963,11 @@ PetscErrorCode CompactionProblem::ConfigureMumps(KSP ksp) {
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_14", &icntl14_set));
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_8", &icntl8_set));
   if (solver_type && std::string(solver_type) == MATSOLVERMUMPS) {
-    Mat factor;
+    Mat mumps;
     PetscCall(PCFactorSetUpMatSolverType(pc));
-    PetscCall(PCFactorGetMatrix(pc, &factor));
-    if (!icntl14_set) PetscCall(MatMumpsSetIcntl(factor, 14, mumps_extra_));
-    if (!icntl8_set) PetscCall(MatMumpsSetIcntl(factor, 8, 0));
+    PetscCall(PCFactorGetMatrix(pc, &mumps));
+    if (!icntl14_set) PetscCall(MatMumpsSetIcntl(mumps, 14, mumps_extra_));
+    if (!icntl8_set) PetscCall(MatMumpsSetIcntl(mumps, 8, 0));
   }
   PetscFunctionReturn(0);
 }

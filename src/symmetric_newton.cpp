@@ -87,19 +87,7 @@ PetscErrorCode CompactionProblem::SymmetricRhs(Vec b, Vec bs) {
 PetscErrorCode CompactionProblem::SymmetricKsp(KSP *ksp) {
   PetscFunctionBeginUser;
   if (!ksp_) PetscCall(SetUpLayout());
-  if (!ksp_ldlt_) {
-    PetscCall(KSPCreate(comm_, &ksp_ldlt_));
-    PetscCall(KSPSetOptionsPrefix(ksp_ldlt_, options_prefix_.c_str()));
-    PetscCall(KSPAppendOptionsPrefix(ksp_ldlt_, "ldlt_"));
-    PetscCall(KSPSetOperators(ksp_ldlt_, J_, J_));
-    PetscCall(KSPSetType(ksp_ldlt_, KSPPREONLY));
-    PC pc;
-    PetscCall(KSPGetPC(ksp_ldlt_, &pc));
-    PetscCall(PCSetType(pc, PCCHOLESKY));
-    PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
-    PetscCall(KSPSetFromOptions(ksp_ldlt_));
-    PetscCall(ConfigureMumps(ksp_ldlt_));
-  }
+  if (!ksp_ldlt_) PetscCall(CreateFactorKsp(PCCHOLESKY, "ldlt_", &ksp_ldlt_));
   *ksp = ksp_ldlt_;
   PetscFunctionReturn(0);
 }

@@ -507,7 +507,10 @@ class CompactionProblem {
   PetscErrorCode FormResidual(Vec z, Vec F);
   PetscErrorCode FormJacobian(Vec z, Mat J);
   PetscErrorCode DestroySolver();
-  PetscErrorCode ConfigureMumps(KSP ksp);  // ICNTL(14) and ICNTL(8) of a MUMPS factor (SetUpLayout)
+  // A KSP on J_ that applies the factorization `factor` (PCLU, PCCHOLESKY)
+  // by MUMPS unless the options (problem's prefix, then prefix) say
+  // otherwise, with MUMPS's ICNTL(14) and ICNTL(8) set.
+  PetscErrorCode CreateFactorKsp(PCType factor, const char *prefix, KSP *ksp);
   PetscErrorCode Gather(Vec z, bool full);  // z -> zall_ (natural order): everything, or own + ghost unknowns
   PetscErrorCode Assemble(const double *z, double *F, std::vector<PetscInt> *ci, std::vector<PetscInt> *cj,
                           std::vector<PetscScalar> *cv, bool *inverted, std::vector<char> *active);
