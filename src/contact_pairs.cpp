@@ -185,13 +185,11 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
     }
     if (!need_K) continue;
     if (values) {
-      // What SymmetrizeNewtonMatrix may do with the rows (problem.hpp).
-      const bool identity_n = ncp.d_gap == 0.0 && ncp.d_lambda == 1.0;
-      const bool scaled_n = barrier_mu_ == 0.0 && ncp_now_ == NcpFunction::Min && ncp.d_lambda == 0.0;
-      jacobian_rows_[2 * c] = identity_n ? 1 : scaled_n ? 2 : 3;
+      // Which rows are identity rows (SymmetrizeNewtonMatrix, problem.hpp).
+      jacobian_rows_[2 * c] = ncp.d_gap == 0.0 && ncp.d_lambda == 1.0 ? 1 : 2;
       if (lt_dof >= 0)
         jacobian_rows_[2 * c + 1] =
-            tan.d_gap == 0.0 && tan.d_slip == 0.0 && tan.d_lambda_n == 0.0 && tan.d_lambda_t == 1.0 ? 1 : 3;
+            tan.d_gap == 0.0 && tan.d_slip == 0.0 && tan.d_lambda_n == 0.0 && tan.d_lambda_t == 1.0 ? 1 : 2;
     }
     if (lc.curved)
       for (int a = 0; a < nd; ++a)

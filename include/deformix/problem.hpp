@@ -472,7 +472,8 @@ class CompactionProblem {
   // -1 / c_n and -R / E (S):
   //     J_s = S L J,  J_s d = S L b  <=>  J d = b,
   // with the body and wall block, and so the curvature of any step, unchanged.
-  // J_s is factored by MUMPS LDL^T (SymmetricKsp), half the flops of LU.
+  // J_s is factored by MUMPS LDL^T (SymmetricKsp), cheaper than LU
+  // (docs/level-solver.md, "Measured: LDL^T against LU").
   // SymmetrizeNewtonMatrix turns J (NewtonMatrix's, not yet shifted) into
   // J_s and keeps what SymmetricRhs needs; *done is false, and J unchanged,
   // where the form does not apply (friction acting, Fischer-Burmeister or
@@ -581,8 +582,8 @@ class CompactionProblem {
   Vec sym_keep_ = nullptr;           // 0 on those rows, else 1
   Vec sym_work_ = nullptr;
   // Per candidate {normal, tangential}: the Newton row of the last Jacobian
-  // assembly is the identity row of an inactive multiplier (1), an active
-  // normal row c_n dg (2), anything else (3), or not this rank's (0).
+  // assembly is the identity row of an inactive multiplier (1), another row
+  // (2), or absent / not this rank's (0).
   std::vector<char> jacobian_rows_;
   std::vector<char> active_now_;
   std::vector<double> switch_margin_;  // per candidate: |lambda_n - c_n g| and ||trial| - mu a| (own contacts; see ChangedStateMargin)
