@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <deque>
 #include <initializer_list>
 #include <vector>
 
@@ -126,6 +127,15 @@ constexpr double kMaxMove = 0.5;        // trust radius cap, in <d>
 constexpr int kMaxRejections = 12;      // rejected trial steps in a row before the load step fails
 constexpr int kBacktracks = 4;          // step fractions 1, 1/2, 1/4, 1/8 tried before a larger shift
 constexpr double kAttemptOverlap = 0.1; // hybrid: deepest overlap of the newton attempt's predicted state, in <d>
+// The energy merit accepts a trial below the largest merit of this many
+// iterates (the iterate's and its predecessors'). Newton steps that roll
+// deformable disks along their contacts lose their accuracy within a
+// twentieth of the boundary node spacing (a step of 3e-3 <d> can raise the
+// residual tenfold with an exact Jacobian), so a monotone test halves the
+// step again and again where a full step raises the energy slightly and the
+// next one lowers it for good (docs/level-solver.md, "Measured: the
+// nonmonotone energy test").
+constexpr size_t kNonmonotoneWindow = 4;
 
 // The iteration of one load step (level_solver.hpp, "newton").
 class MeritNewton {
@@ -272,6 +282,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
     PetscFunctionReturn(0);
   };
   const auto psi_of = [&](const EnergyParts &e) { return e.enthalpy + nu * e.penetration + e.dissipation; };
+  std::deque<EnergyParts> recent;  // the energy merit's parts at the last accepted iterates
   // A new anchor at the iterate (the last residual evaluation): G = F there,
   // rho from its largest force, the energy merit's Tresca bounds lagged there.
   const auto anchor = [&]() -> PetscErrorCode {
@@ -464,7 +475,12 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
             // linearization resolves.
             PetscCall(energy_parts(&trial_parts));
             psi = psi_of(at_z), trial_psi = psi_of(trial_parts);
-            const double change = trial_psi - psi, band = 1e-13 * std::abs(psi);
+            // Nonmonotone (Grippo, Lampariello and Lucidi): the trial is
+            // compared with the largest merit of the last kNonmonotoneWindow
+            // iterates (the iterate's included), each with this step's nu.
+            double reference = psi;
+            for (const EnergyParts &e : recent) reference = std::max(reference, psi_of(e));
+            const double change = trial_psi - reference, band = 1e-13 * std::abs(psi);
             accepted = std::isfinite(trial_gnorm) && std::isfinite(trial_psi) && (change < -band || residual_decreased);
           } else {
             accepted = residual_decreased;
@@ -475,15 +491,22 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
           if (prm_.monitor) {
             double blocks[5];
             PetscCall(p_.ResidualBlocks(Ft_, blocks));
-            int closed = 0, sliding = 0;
-            for (char a : p_.ActiveSet()) closed += a == kClosed, sliding += a == kSliding;
+            int closed = 0, sliding = 0, closing = 0, opening = 0;
+            const std::vector<char> &now = p_.ActiveSet();
+            for (char a : now) closed += a == kClosed, sliding += a == kSliding;
+            if (now.size() == active_before.size())
+              for (size_t c = 0; c < now.size(); ++c)
+                closing += active_before[c] == kOpen && now[c] != kOpen, opening += active_before[c] != kOpen && now[c] == kOpen;
+            double moves[3];
+            PetscCall(p_.StepMoves(z_, s_, moves));
             PetscCall(PetscPrintf(comm_,
                                   "    newton %3" PetscInt_FMT "  |F| %.3e  |G| %.3e -> %.3e (trial |F| %.3e)  |F|_inf %.2e  "
-                                  "m %.1e rho %.1e  alpha %.3f |s| %.1e  %s  closed %d sliding %d  "
+                                  "m %.1e rho %.1e  alpha %.3f |s| %.1e (translation %.1e rotation %.1e deformation %.1e)  %s  "
+                                  "closed %d (+%d -%d) sliding %d  "
                                   "(trial rows: body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)",
                                   report->newton_its, fnorm, gnorm, trial_gnorm, trial_norm, force, move, rho, alpha, step,
-                                  accepted ? "accepted" : "rejected", closed, sliding, blocks[0], blocks[1], blocks[2],
-                                  blocks[3], blocks[4]));
+                                  moves[0], moves[1], moves[2], accepted ? "accepted" : "rejected", closed, closing, opening,
+                                  sliding, blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]));
             if (energy_step)
               PetscCall(PetscPrintf(comm_, "  energy change %+.3e of %.6e (enthalpy %+.3e, nu %.2e x penetration %+.3e, dissipation %+.3e)",
                                     trial_psi - psi, psi, trial_parts.enthalpy - at_z.enthalpy, nu,
@@ -507,6 +530,10 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         // radius grows after every accepted step.
         move = std::min(4.0 * move, kMaxMove);
         PetscCall(anchor());
+        if (energy) {
+          recent.push_back(at_z);
+          if (recent.size() > kNonmonotoneWindow) recent.pop_front();
+        }
         gnorm = fnorm;
         if (!prm_.monitor) {
           char radius[64];

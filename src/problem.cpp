@@ -1084,6 +1084,31 @@ PetscErrorCode CompactionProblem::AdoptState(Vec z) {
   PetscFunctionReturn(0);
 }
 
+namespace {
+
+// The rigid part of a deformable body's step d at positions X + z (both
+// offset to the body's first unknown, nn nodes): the centroid c, the mean
+// translation t, and the rotation theta about c that fits the nodal steps
+// best in least squares.
+void RigidPartOfStep(const double *X, int nn, const PetscScalar *z, const PetscScalar *d, double c[2], double t[2],
+                     double *theta) {
+  c[0] = c[1] = t[0] = t[1] = 0.0;
+  for (int a = 0; a < nn; ++a)
+    for (int i = 0; i < 2; ++i) {
+      c[i] += (X[2 * a + i] + z[2 * a + i]) / nn;
+      t[i] += d[2 * a + i] / nn;
+    }
+  double num = 0.0, den = 0.0;
+  for (int a = 0; a < nn; ++a) {
+    const double r[2] = {X[2 * a] + z[2 * a] - c[0], X[2 * a + 1] + z[2 * a + 1] - c[1]};
+    num += r[0] * (d[2 * a + 1] - t[1]) - r[1] * (d[2 * a] - t[0]);
+    den += r[0] * r[0] + r[1] * r[1];
+  }
+  *theta = den > 0.0 ? num / den : 0.0;
+}
+
+}  // namespace
+
 PetscErrorCode CompactionProblem::RotatedUpdate(Vec zv, Vec dv, Vec ztv) const {
   const PetscScalar *z, *d;
   PetscScalar *zt;
@@ -1097,19 +1122,8 @@ PetscErrorCode CompactionProblem::RotatedUpdate(Vec zv, Vec dv, Vec ztv) const {
     const int nn = body.mesh.num_nodes();
     // Local (owned) index of node a's x unknown; a body's unknowns are contiguous in both numberings.
     const PetscInt first = petsc_of_[body.dof_offset] - own_lo_;
-    double c[2] = {0, 0}, t[2] = {0, 0};
-    for (int a = 0; a < nn; ++a)
-      for (int i = 0; i < 2; ++i) {
-        c[i] += (body.mesh.X[2 * a + i] + z[first + 2 * a + i]) / nn;
-        t[i] += d[first + 2 * a + i] / nn;
-      }
-    double num = 0.0, den = 0.0;
-    for (int a = 0; a < nn; ++a) {
-      const double r[2] = {body.mesh.X[2 * a] + z[first + 2 * a] - c[0], body.mesh.X[2 * a + 1] + z[first + 2 * a + 1] - c[1]};
-      num += r[0] * (d[first + 2 * a + 1] - t[1]) - r[1] * (d[first + 2 * a] - t[0]);
-      den += r[0] * r[0] + r[1] * r[1];
-    }
-    const double theta = den > 0.0 ? num / den : 0.0;
+    double c[2], t[2], theta;
+    RigidPartOfStep(body.mesh.X.data(), nn, z + first, d + first, c, t, &theta);
     const double cm1 = std::cos(theta) - 1.0, smt = std::sin(theta) - theta;
     for (int a = 0; a < nn; ++a) {
       const double r[2] = {body.mesh.X[2 * a] + z[first + 2 * a] - c[0], body.mesh.X[2 * a + 1] + z[first + 2 * a + 1] - c[1]};
@@ -1120,6 +1134,37 @@ PetscErrorCode CompactionProblem::RotatedUpdate(Vec zv, Vec dv, Vec ztv) const {
   PetscCall(VecRestoreArray(ztv, &zt));
   PetscCall(VecRestoreArrayRead(dv, &d));
   PetscCall(VecRestoreArrayRead(zv, &z));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode CompactionProblem::StepMoves(Vec zv, Vec sv, double moves[3]) const {
+  const PetscScalar *z, *d;
+  PetscFunctionBeginUser;
+  moves[0] = moves[1] = moves[2] = 0.0;
+  PetscCall(VecGetArrayRead(zv, &z));
+  PetscCall(VecGetArrayRead(sv, &d));
+  for (const DeformableBody &body : bodies_) {
+    if (ParticleOwner(body.particle) != rank_) continue;
+    const int nn = body.mesh.num_nodes();
+    const PetscInt first = petsc_of_[body.dof_offset] - own_lo_;
+    double c[2], t[2], theta;
+    RigidPartOfStep(body.mesh.X.data(), nn, z + first, d + first, c, t, &theta);
+    moves[0] = std::max(moves[0], std::hypot(t[0], t[1]));
+    moves[1] = std::max(moves[1], std::abs(theta) * body.mesh.radius);
+    for (int a = 0; a < nn; ++a) {
+      const double r[2] = {body.mesh.X[2 * a] + z[first + 2 * a] - c[0], body.mesh.X[2 * a + 1] + z[first + 2 * a + 1] - c[1]};
+      moves[2] = std::max(moves[2], std::hypot(d[first + 2 * a] - t[0] + theta * r[1], d[first + 2 * a + 1] - t[1] - theta * r[0]));
+    }
+  }
+  for (const RigidBody &r : rigid_) {
+    if (ParticleOwner(r.particle) != rank_) continue;
+    const PetscInt first = petsc_of_[r.dof_offset] - own_lo_;
+    moves[0] = std::max(moves[0], std::hypot(d[first], d[first + 1]));
+    if (RigidDofs() == 3) moves[1] = std::max(moves[1], std::abs(d[first + 2]) * r.radius);
+  }
+  PetscCall(VecRestoreArrayRead(sv, &d));
+  PetscCall(VecRestoreArrayRead(zv, &z));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, moves, 3, MPI_DOUBLE, MPI_MAX, comm_));
   PetscFunctionReturn(0);
 }
 

@@ -562,6 +562,7 @@ TEST(ContactProblem, ProximalTermIsRhoOnBodyAndWallDiagonal) {
 // about the centroid plus a translation t puts every node exactly at
 // c + t + R(theta)(x - c), so no element changes its area; a translation, and
 // every unknown that is not a node of a deformable body, is added as it is.
+// StepMoves (the monitor's split of a step) reads the same rotation.
 TEST(ContactProblem, RotatedUpdateAppliesTheMeanRotationExactly) {
   ProblemParameters params;
   auto problem = MakeDisk(params, 24);
@@ -616,6 +617,28 @@ TEST(ContactProblem, RotatedUpdateAppliesTheMeanRotationExactly) {
     ASSERT_PETSC(VecRestoreArrayRead(d, &db));
     EXPECT_LT(node_error, 1e-13) << "theta " << theta;
     EXPECT_EQ(other_error, 0.0) << "theta " << theta;
+    // StepMoves splits the same increment into its translation |t| and
+    // rotation |theta| R, with no deformation; a radial expansion e r added
+    // to it is deformation only (it has no mean and no rotation about the
+    // centroid), as large as e times the largest radius.
+    double moves[3];
+    ASSERT_PETSC(problem->StepMoves(z, d, moves));
+    EXPECT_NEAR(moves[0], std::hypot(t[0], t[1]), 1e-14) << "theta " << theta;
+    EXPECT_NEAR(moves[1], std::abs(theta) * body.mesh.radius, 1e-13) << "theta " << theta;
+    EXPECT_LT(moves[2], 1e-13) << "theta " << theta;
+    const double e = 2e-3;
+    double rmax = 0.0;
+    ASSERT_PETSC(VecGetArray(d, &da));
+    for (int a = 0; a < nn; ++a) {
+      const double r[2] = {x[2 * a] - c[0], x[2 * a + 1] - c[1]};
+      da[body.dof_offset + 2 * a] += e * r[0], da[body.dof_offset + 2 * a + 1] += e * r[1];
+      rmax = std::max(rmax, std::hypot(r[0], r[1]));
+    }
+    ASSERT_PETSC(VecRestoreArray(d, &da));
+    ASSERT_PETSC(problem->StepMoves(z, d, moves));
+    EXPECT_NEAR(moves[0], std::hypot(t[0], t[1]), 1e-13) << "theta " << theta;
+    EXPECT_NEAR(moves[1], std::abs(theta) * body.mesh.radius, 1e-12) << "theta " << theta;
+    EXPECT_NEAR(moves[2], e * rmax, 1e-13) << "theta " << theta;
   }
   VecDestroy(&z);
   VecDestroy(&d);

@@ -38,8 +38,9 @@
 //   nodal force below tol P <d>, every contact row exact (below 1e-11 E <d>),
 //   the contact states stable and phi settled to -level_phi_rtol over the
 //   last step.
-//   With -level_merit energy a step is also accepted when it decreases
-//   the energy merit
+//   With -level_merit energy a step is also accepted when it brings the
+//   energy merit below its largest value at the last four iterates (a
+//   nonmonotone test; the iterate's value alone is the monotone one), the merit
 //       psi(z) = H(z) + nu sum_c max(0, -g_c - e) + sum_c mu lambda_n,c |s_c|,
 //   H the enthalpy (strain energy + P x box area), nu above every normal
 //   force of the iterate and of the step's end point (an exact l1 penalty),

@@ -363,6 +363,10 @@ class CompactionProblem {
   // of a frictionless disk a Newton step would be valid only for theta <<
   // sqrt(|F| / lambda); with the rotation applied exactly it is not limited.
   PetscErrorCode RotatedUpdate(Vec z, Vec d, Vec zt) const;
+  // The largest move of a body in step s from z, split into its rigid
+  // translation, its rotation times the radius, and the largest nodal
+  // deviation from the body's rigid motion (deformation); for -level_monitor.
+  PetscErrorCode StepMoves(Vec z, Vec s, double moves[3]) const;
   // Balance of a residual F at the problem's state, for the level criterion:
   // the largest net force and net torque (about its centroid) on a body, the
   // largest nodal or wall force (torques of rigid rotations / radius), and the
