@@ -478,6 +478,9 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
             // Nonmonotone (Grippo, Lampariello and Lucidi): the trial is
             // compared with the largest merit of the last kNonmonotoneWindow
             // iterates (the iterate's included), each with this step's nu.
+            // With friction their dissipations were lagged at different
+            // iterates, so the comparison is looser there (auto takes the
+            // energy merit on frictionless levels only).
             double reference = psi;
             for (const EnergyParts &e : recent) reference = std::max(reference, psi_of(e));
             const double change = trial_psi - reference, band = 1e-13 * std::abs(psi);
