@@ -13,7 +13,7 @@ static const char help[] =
     "    elasticity + rigid bodies + walls (P x length) + Signorini + Coulomb (Alart-Curnier)\n"
     "solved by semismooth Newton (MUMPS LU) inside pseudo-transient continuation: -level_solver newton\n"
     "takes one Newton step per pseudo-time step, accepted by the residual of its proximal subproblem,\n"
-    "-level_solver anchored solves every pseudo-time step to convergence, -level_solver hybrid\n"
+    "-level_solver anchored solves every pseudo-time step (to a 100-fold drop of its residual), -level_solver hybrid\n"
     "tries newton for -level_attempt_its linearizations and goes on with anchored from there, and\n"
     "-level_solver auto (default) takes newton with the energy merit (enthalpy + exact penalty,\n"
     "-level_merit energy) on levels without friction and hybrid on frictional levels.\n"

@@ -67,9 +67,9 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                               "its Newton matrix: one more factorization per level); halved while it would make bodies "
                               "overlap or invert an element",
                               "", predictor_names, 3, predictor_names[predictor_choice], &predictor_choice, nullptr));
-  PetscCall(PetscOptionsInt("-ptc_easy_its", "pseudo-transient continuation: double the move after an inner solve of at most this many Newton iterations",
+  PetscCall(PetscOptionsInt("-ptc_easy_its", "pseudo-transient continuation: grow the move by 1.25 after an inner solve of at most this many Newton iterations",
                             "", ptc_easy_its, &ptc_easy_its, nullptr));
-  PetscCall(PetscOptionsInt("-ptc_stall_its", "pseudo-transient continuation: an inner solve that has not halved its residual after this many Newton iterations is cut short and retried with more damping",
+  PetscCall(PetscOptionsInt("-ptc_stall_its", "pseudo-transient continuation: an inner solve that has not halved its residual after this many Newton iterations is cut short and retried with more damping (one that has ends there)",
                             "", ptc_stall_its, &ptc_stall_its, nullptr));
   PetscCall(PetscOptionsInt("-ptc_max_steps", "pseudo-time steps per sub-step before it counts as failed (the load step is then cut)",
                             "", ptc_max_steps, &ptc_max_steps, nullptr));

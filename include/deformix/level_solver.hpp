@@ -59,10 +59,11 @@
 //   cannot re-solve with a larger shift. Hence this loop on PETSc's KSP and
 //   the problem's residual and Jacobian.
 // anchored: pseudo-transient continuation with each pseudo-time step solved
-//   to convergence by SNESNEWTONLS. Each inner solve adds rho D (z - z_a)
+//   by SNESNEWTONLS until its residual has dropped 100-fold (or to the
+//   exact tolerance). Each inner solve adds rho D (z - z_a)
 //   to the body and wall rows (the problem's SetAnchor), rho = |F|_inf /
 //   (m <d>) from the unbalanced force F of the previous pseudo-time step, m
-//   = -ptc_move at first, doubled after an inner solve of at most
+//   = -ptc_move at first, grown by 1.25 after an inner solve of at most
 //   -ptc_easy_its iterations, divided by 4 after a failed one; the anchor
 //   moves to each solution and rho vanishes with F. A sub-step is accepted at
 //   exact equilibrium (|R| <= 1e-11 E <d>) or, with -level_force_rtol tol >
@@ -83,7 +84,8 @@
 //   states equal to those of two or three iterations ago (an active-set
 //   cycle, typically stick <-> slip on the edge of the cone) is backtracked
 //   until |R| decreases; an inner solve that has not halved its residual in
-//   -ptc_stall_its (6) iterations is cut short and retried with more damping.
+//   -ptc_stall_its (6) iterations is cut short and retried with more damping,
+//   one that has halved it ends there (an inexact pseudo-time step).
 //   The SNES and its callbacks live in level_solver.cpp over a small context.
 // hybrid: a newton attempt of at most -level_attempt_its linearizations,
 //   started from the tangent predictor with overlaps up to 0.1 <d> admitted

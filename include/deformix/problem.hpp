@@ -107,7 +107,7 @@ struct ProblemParameters {
   double ncp_scale = 1.0;        // c_n = c_t = ncp_scale * E
   double prox_eta = 1e-8;        // smallest rho / E
   double ptc_move = 0.0;         // pseudo-transient continuation: move per pseudo-time step / <d> (0: plain Newton)
-  PetscInt ptc_easy_its = 8;     // the move doubles after an inner solve of at most this many Newton iterations
+  PetscInt ptc_easy_its = 8;     // the move grows by 1.25 after an inner solve of at most this many Newton iterations
   PetscInt ptc_stall_its = 6;     // an inner solve that has not halved its residual after this many Newton iterations is cut short
   PetscInt ptc_max_steps = 1000; // pseudo-time steps per sub-step before it counts as failed
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
