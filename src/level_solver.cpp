@@ -627,7 +627,6 @@ class AnchoredContinuation {
   std::vector<std::uint64_t> history_;      // hashes of the contact states of the last Newton iterates (LimitStep)
   bool backtrack_ = false;                  // LimitStep found an active-set cycle: Backtrack this step
   double fnorm0_ = 0.0;
-  double forcing_ = 0.0;  // an inner solve ends at |G| <= forcing_ |G_0| (0: at the exact tolerance)
   bool stalled_ = false;  // the last inner solve ended at ptc_stall_its with |G| halved (Converged)
 };
 
@@ -706,9 +705,17 @@ PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal
   a->checked_ = now;
   *reason = SNES_CONVERGED_ITERATING;
   if (it == 0) a->fnorm0_ = fnorm;
+  // Inexact pseudo-time steps: the path in pseudo-time is not the answer,
+  // only its end point is, so inside pseudo-transient continuation an inner
+  // solve ends once it has reduced |G| by kInnerForcing (inexact Newton on
+  // each pseudo-time step; Kelley and Keyes's Psi-tc takes a single Newton
+  // step). The level is still accepted only with exact contact rows and the
+  // level criterion (Solve); a state short of them is the anchor of the
+  // next pseudo-time step. SNES's -snes_rtol, if larger, applies instead.
+  const PetscReal forcing = a->p_.AnchorWeight() > 0.0 ? kInnerForcing : 0.0;
   if (PetscIsInfOrNanReal(fnorm)) {
     *reason = SNES_DIVERGED_FNORM_NAN;
-  } else if (fnorm <= std::max<PetscReal>(atol, std::max<PetscReal>(rtol, a->forcing_) * a->fnorm0_) &&
+  } else if (fnorm <= std::max<PetscReal>(atol, std::max<PetscReal>(rtol, forcing) * a->fnorm0_) &&
              (it == 0 || !changed_any || snorm <= 1e-12 * a->p_.MeanDiameter() ||
               changed_margin <= kDegenerateSwitch * atol)) {
     // A contact state may still flip at a converged point when the contact
@@ -905,17 +912,9 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     PetscCall(p_.Residual(z_, F_));
     PetscCall(p_.ForceResidual(F_, &force_residual));
   }
-  // Inexact pseudo-time steps: the path in pseudo-time is not the answer,
-  // only its end point is, so an inner solve ends once it has reduced |G| by
-  // kInnerForcing (inexact Newton on each pseudo-time step; Kelley and
-  // Keyes's Psi-tc takes a single Newton step). The level is still accepted
-  // only with exact contact rows and the level criterion (below); a state
-  // short of them is the anchor of the next pseudo-time step. SNES's
-  // -snes_rtol, if larger, applies instead.
   for (int outer = 0, refresh = 0;; ++outer) {
     PetscCall(Attach());  // packs the state into z_
     p_.SetAnchor(ptc ? std::max(rho_floor, force_residual / (move * dmean)) : 0.0);
-    forcing_ = ptc ? kInnerForcing : 0.0;
     checked_.clear();
     history_.clear();
     stalled_ = false;
