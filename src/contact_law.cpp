@@ -53,7 +53,7 @@ ClampedBarrier clamped_barrier(double s, double shat) {
 }
 
 TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double slip, double mu, double c_n,
-                          double c_t) {
+                          double c_t, double tie) {
   TangentialNcp r;
   const double a = lambda_n - c_n * gap;
   if (!(a > 0.0)) {
@@ -66,7 +66,7 @@ TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double s
   // Stick needs a cone to stick in: with mu = 0 (friction switched off) a
   // zero trial (no slip, no tangential force, e.g. at the start of a step)
   // must not lock the tangential motion.
-  if (bound > 0.0 && std::abs(trial) <= bound) {
+  if (bound > 0.0 && std::abs(trial) <= bound - tie) {
     r.state = kClosed;
     r.value = c_t * slip;
     r.d_slip = c_t;

@@ -12,7 +12,7 @@ namespace deformix {
 
 // Kinematics of one candidate: gap, slip and derivatives on its global unknowns.
 void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double *z, LocalContact *lc, bool hessians) const {
-  const double *z0 = u_start_.empty() ? z : u_start_.data();  // slip reference: the start of the step
+  const double *z0 = u_start_.empty() ? z : u_start_.data();  // slip reference: the start of the increment
   double q[PairKinematics::kMaxDofs] = {}, q0[PairKinematics::kMaxDofs] = {};
   int nq = 0;
   auto add_node = [&](const DeformableBody &body, int node) {
@@ -165,7 +165,7 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
       if (active) barrier_row_[2 * c] = ncp.d_gap, barrier_row_[2 * c + 1] = barrier_mu_ * bar.psi;
     }
     TangentialNcp tan;
-    if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t);
+    if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t, kSlipTie * c_t * mean_diameter_);
     if (active) {
       (*active)[c] = lt_dof >= 0 ? tan.state : (ncp.active ? kClosed : kOpen);
       switch_margin_[2 * c] = ncp.switch_margin;

@@ -914,6 +914,14 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   }
   for (int outer = 0, refresh = 0;; ++outer) {
     PetscCall(Attach());  // packs the state into z_
+    // Friction is incremental per pseudo-time step: the slip is measured from
+    // the anchor, so a contact that slid in one step can stick in the next
+    // (Coulomb along the pseudo-time path, as the paper's contact dynamics
+    // has it per time step). Measured from the start of the level, a
+    // contact that has slid must stay on its cone until it slides back, and
+    // a body whose contacts all slid has no stiffness but rho's against
+    // turning or sliding on ("Measured: friction per pseudo-time step").
+    if (ptc) p_.MarkStepStart();
     p_.SetAnchor(ptc ? std::max(rho_floor, force_residual / (move * dmean)) : 0.0);
     checked_.clear();
     history_.clear();

@@ -245,6 +245,24 @@ TEST(CoulombLaw, StickSlipAndOpenBranches) {
   EXPECT_DOUBLE_EQ(off.d_lambda_t, 1.0);
 }
 
+// A contact that slid up to the start of an increment sits on its cone with
+// no slip yet (|lambda_t| = mu lambda_n to the last solve's tolerance): with
+// the tie it takes the slip row, whose residual there is within the tie;
+// without it the stick row. Inside the cone by more than the tie it sticks.
+TEST(CoulombLaw, ForceOnTheConeWithinTheTieTakesTheSlipRow) {
+  const double mu = 0.2, c = 1.0, tie = 1e-8;
+  for (double lt : {0.2 - 1e-10, 0.2, -0.2 + 3e-9}) {
+    const TangentialNcp with_tie = coulomb_ncp(lt, 1.0, 0.0, 0.0, mu, c, c, tie);
+    EXPECT_EQ(with_tie.state, kSliding) << "lambda_t " << lt;
+    EXPECT_LE(std::abs(with_tie.value), tie) << "lambda_t " << lt;
+    EXPECT_DOUBLE_EQ(with_tie.d_lambda_n, lt > 0.0 ? -mu : mu);
+  }
+  EXPECT_EQ(coulomb_ncp(0.2 - 1e-10, 1.0, 0.0, 0.0, mu, c, c).state, kClosed) << "without the tie: stick";
+  EXPECT_EQ(coulomb_ncp(0.2 - 2e-8, 1.0, 0.0, 0.0, mu, c, c, tie).state, kClosed) << "inside the cone beyond the tie";
+  // A slip that reverses the trial force's sign still sticks inside the cone.
+  EXPECT_EQ(coulomb_ncp(0.2 - 1e-10, 1.0, 0.0, 0.1, mu, c, c, tie).state, kClosed);
+}
+
 // The min NCP row of a touching contact without force: with the tie band
 // it is the closed row whatever the sign of the gap's round-off; without it
 // the sign decides (the rank dependence the band removes); a gap beyond the

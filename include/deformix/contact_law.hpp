@@ -19,7 +19,8 @@
 // g >= 0 and lambda >= 0 exactly up to the Newton tolerance.
 //
 // Coulomb friction (2D, incremental). With s the tangential slip over the
-// load step and lambda_t the tangential force on the slave along t, the
+// increment (the load step, or one pseudo-time step of the anchored level
+// solver) and lambda_t the tangential force on the slave along t, the
 // Alart-Curnier projection
 //     C_t = lambda_t - proj_[-mu a, mu a](lambda_t - c_t s),
 //     a   = max(0, lambda_n - c_n g)   (the augmented normal force)
@@ -82,8 +83,17 @@ struct TangentialNcp {
   double switch_margin = 0.0;  // | |lambda_t - c_t s| - mu a |: how far stick is from slip (0 when open)
 };
 
+// tie (>= 0, force units): a contact whose trial force is within tie of the
+// cone, |lambda_t - c_t s| >= mu a - tie, takes the slip row. A contact that
+// slid up to the start of an increment has s = 0 and |lambda_t| = mu a to
+// the tolerance of the last solve: both rows hold there, and the stick row
+// (0 slip) would make the first Newton step of the increment hold it, the
+// next one let it slide again (and a rigid disk whose contacts all slid
+// then turns back and forth). With the slip row it goes on sliding unless
+// its slip reverses. A converged state is exact Coulomb either way: stick
+// strictly inside the cone, or a force on the cone.
 TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double slip, double mu, double c_n,
-                          double c_t);
+                          double c_t, double tie = 0.0);
 
 // Degenerate state changes. At a converged point a weakly active contact
 // (lambda_n = c_n g = 0, or |lambda_t| = mu lambda_n without slip) may

@@ -256,6 +256,11 @@ class CompactionProblem {
   // Gaps within this many <d> of zero are round-off of a touching contact:
   // a contact without force there has the row of a closed one (normal_ncp's tie).
   static constexpr double kTouchingGap = 1e-12;
+  // Trial tangential forces within c_t x this many <d> of the Coulomb cone
+  // take the slip row (coulomb_ncp's tie): 10 to 100 times the tangential
+  // residual that an inexact pseudo-time step leaves, far below the level's
+  // tolerance on forces.
+  static constexpr double kSlipTie = 1e-8;
   // A state the first Newton step of a load step can start from: no element
   // inverted, no overlap deeper than overlap_limit <d> (BeginLoadStep).
   bool PredictionAdmissible(double overlap_limit) const;
@@ -448,7 +453,8 @@ class CompactionProblem {
   void SetFrictionActive(bool on) { friction_on_ = on; }
   // Friction acts in this load step: a frictional packing, out of its frictionless settling level.
   bool FrictionActive() const { return Frictional() && friction_on_; }
-  // Makes the current state the start of the load step (reference of the incremental slip).
+  // Makes the current state the reference of the incremental slip: the
+  // start of the load step, or of a pseudo-time step (level_solver.hpp).
   void MarkStepStart() { u_start_ = u_; }
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
   // Candidates within margin x <d> at the current state: all of them (gathered
@@ -550,7 +556,7 @@ class CompactionProblem {
   std::vector<RigidBody> rigid_;
   PetscInt n_body_dofs_ = 0;
   std::vector<double> u_;        // body unknowns (replicated)
-  std::vector<double> u_start_;  // body unknowns at the start of the load step (slip reference)
+  std::vector<double> u_start_;  // body unknowns at the start of the increment (slip reference: MarkStepStart)
   std::vector<double> torque_;   // rotation-gauge multipliers, one per constrained body
   double w_[4] = {0, 0, 0, 0};
   double pressure_ = 0.0;
