@@ -56,7 +56,7 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsReal("-prox_eta", "proximal regularization of the Newton step, rho / E (vanishes at equilibrium)",
                              "", prox_eta, &prox_eta, nullptr));
   PetscCall(PetscOptionsReal("-ptc_move",
-                             "pseudo-transient continuation: largest move of a body per pseudo-time step / <d> (0: plain Newton)",
+                             "pseudo-transient continuation: largest move of a body per pseudo-time step / <d>; each step is one Coulomb increment (0: plain Newton)",
                              "", ptc_move, &ptc_move, nullptr));
   PetscCall(PetscOptionsBool("-constrain_rotation",
                              "fix the mean rotation of frictionless deformable bodies (zero-energy mode; its torque is reported)",
