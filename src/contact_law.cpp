@@ -65,7 +65,10 @@ TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double s
   r.switch_margin = std::abs(std::abs(trial) - bound);
   // Stick needs a cone to stick in: with mu = 0 (friction switched off) a
   // zero trial (no slip, no tangential force, e.g. at the start of a step)
-  // must not lock the tangential motion.
+  // must not lock the tangential motion. Within tie of the cone the slip row
+  // is taken (contact_law.hpp); a contact whose bound is below tie (mu a <
+  // 1e-8 c_t <d> with kSlipTie: a force that the level criterion cannot see)
+  // always takes it, with its tangential force on the cone.
   if (bound > 0.0 && std::abs(trial) <= bound - tie) {
     r.state = kClosed;
     r.value = c_t * slip;
