@@ -149,6 +149,16 @@ constexpr double kInnerForcing = 1e-2;
 // and a retry. Measured on the same scenes (docs/level-solver.md): 1.25 and
 // 1.5 took 3396 and 3414 iterations against 3631 with 2.
 constexpr double kMoveGrowth = 1.25;
+// anchored gives a sub-step up (the load controller cuts it) once its force
+// residual exceeds this multiple of the larger of its value at the start of
+// the sub-step and P <d>. Each pseudo-time step only has to reduce the
+// residual of its own subproblem, G = F + rho_a D (z - z_a), so under a
+// large rho_a (move m of 1e-7 <d>) a run of accepted steps can let F grow
+// by a few per cent per step: measured on n50_k0.2_mu0.2 at P/E 0.5, one
+// sub-step went on for 900 pseudo-time steps (5400 Newton iterations) with
+// |F|_inf growing from 2 to 5e6 E <d> until -ptc_max_steps
+// (docs/level-solver.md, "Measured: the 50-disk campaign with auto").
+constexpr double kDivergedForce = 100.0;
 
 // The iteration of one load step (level_solver.hpp, "newton").
 class MeritNewton {
@@ -912,6 +922,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     PetscCall(p_.Residual(z_, F_));
     PetscCall(p_.ForceResidual(F_, &force_residual));
   }
+  const double diverged_force = kDivergedForce * std::max(force_residual, pressure * dmean);
   for (int outer = 0, refresh = 0;; ++outer) {
     PetscCall(Attach());  // packs the state into z_
     // Friction is incremental per pseudo-time step: the slip is measured from
@@ -1026,6 +1037,13 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     phi_last = phi;
     if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step
       report->reason = SNES_DIVERGED_MAX_IT;
+      PetscCall(p_.EndLoadStep(false, report));
+      PetscFunctionReturn(0);
+    }
+    if (ptc && force_residual > diverged_force) {  // diverging: a failed solve as well
+      if (prm_.ptc_monitor)
+        PetscCall(PetscPrintf(comm_, "  ptc %3d  diverged: |F|_inf %.3e above %.3e\n", outer, force_residual, diverged_force));
+      report->reason = SNES_DIVERGED_DTOL;
       PetscCall(p_.EndLoadStep(false, report));
       PetscFunctionReturn(0);
     }

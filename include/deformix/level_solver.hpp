@@ -85,7 +85,9 @@
 //   cycle, typically stick <-> slip on the edge of the cone) is backtracked
 //   until |R| decreases; an inner solve that has not halved its residual in
 //   -ptc_stall_its (6) iterations is cut short and retried with more damping,
-//   one that has halved it ends there (an inexact pseudo-time step).
+//   one that has halved it ends there (an inexact pseudo-time step). A
+//   sub-step whose force residual grows beyond 100 times the larger of its
+//   start value and P <d> has failed (kDivergedForce): the controller cuts it.
 //   The SNES and its callbacks live in level_solver.cpp over a small context.
 // hybrid: a newton attempt of at most -level_attempt_its linearizations,
 //   started from the tangent predictor with overlaps up to 0.1 <d> admitted
