@@ -1035,15 +1035,12 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       }
     }
     phi_last = phi;
-    if (outer >= max_outer) {  // did not settle: a failed solve, the load controller cuts the step
-      report->reason = SNES_DIVERGED_MAX_IT;
-      PetscCall(p_.EndLoadStep(false, report));
-      PetscFunctionReturn(0);
-    }
-    if (ptc && force_residual > diverged_force) {  // diverging: a failed solve as well
-      if (prm_.ptc_monitor)
+    // Did not settle, or diverging: a failed solve, the load controller cuts the step.
+    const bool diverged = ptc && force_residual > diverged_force;
+    if (outer >= max_outer || diverged) {
+      if (diverged && prm_.ptc_monitor)
         PetscCall(PetscPrintf(comm_, "  ptc %3d  diverged: |F|_inf %.3e above %.3e\n", outer, force_residual, diverged_force));
-      report->reason = SNES_DIVERGED_DTOL;
+      report->reason = outer >= max_outer ? SNES_DIVERGED_MAX_IT : SNES_DIVERGED_DTOL;
       PetscCall(p_.EndLoadStep(false, report));
       PetscFunctionReturn(0);
     }
