@@ -147,6 +147,45 @@ const std::vector<std::string> kCurveColumns = {
     "force_residual_over_Pd", "relaxed_substeps", "gauge_torque_over_Pd2", "factorizations",
     "body_force_over_Pd", "body_torque_over_Pd2"};
 
+// A settling load step (the rigid pre-settling, the frictionless settling
+// of the mixture): with -level_solver auto it is tried in one load step,
+// and where that fails, solved by hybrid from the state before it. auto's
+// newton (energy merit) can fail on a packing that still has to settle:
+// on the 1500-disk paper scene the rigid settling failed at every one of
+// 17 step cuts (its trial steps' multipliers blow up the contact rows),
+// where hybrid settles in 213 iterations (11 s on 2 ranks), and the
+// frictionless settling of the mixture at P/E 1e-5 failed at every cut
+// down to 3e-7 P (halving the pressure does not make the geometry easier).
+// Other strategies step as usual.
+PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &load, double pressure, double *step,
+                      LevelReport *rep) {
+  PetscFunctionBeginUser;
+  if (load.level.strategy != LevelStrategy::Auto) {
+    PetscCall(AdvanceToPressure(problem, load, pressure, step, rep));
+    PetscFunctionReturn(0);
+  }
+  LoadControlParameters once = load;
+  once.max_cuts = 0;
+  const double step_before = *step;
+  PetscCall(PetscPushErrorHandler(PetscReturnErrorHandler, nullptr));
+  const PetscErrorCode ierr = AdvanceToPressure(problem, once, pressure, step, rep);
+  PetscCall(PetscPopErrorHandler());
+  if (ierr != PETSC_ERR_NOT_CONVERGED) {
+    PetscCall(ierr);
+    PetscFunctionReturn(0);
+  }
+  const LevelReport first = *rep;
+  LoadControlParameters hybrid = load;
+  hybrid.level.strategy = LevelStrategy::Hybrid;
+  *step = step_before;
+  PetscCall(AdvanceToPressure(problem, hybrid, pressure, step, rep));
+  rep->newton_its += first.newton_its;
+  rep->factorizations += first.factorizations;
+  rep->inner_solves += first.inner_solves;
+  rep->cuts += first.cuts;
+  PetscFunctionReturn(0);
+}
+
 PetscErrorCode Run(MPI_Comm comm) {
   CompactOptions opts;
   ProblemParameters params;
@@ -314,30 +353,7 @@ PetscErrorCode Run(MPI_Comm comm) {
     // At most P/E = 1e-4: contacts exact, deformations negligible; larger
     // first levels are then reached by load stepping.
     const double P_settle = std::min(opts.pressures[0], 1e-4) * params.young;
-    // auto's newton (energy merit) can fail on a large hyperstatic rigid
-    // network: on the 1500-disk paper scene it failed at every one of 17
-    // step cuts (its trial steps' multipliers blow up the contact rows),
-    // where hybrid settles in 213 iterations (11 s on 2 ranks). So with auto
-    // the settling is tried in one step first, then by hybrid.
-    if (load.level.strategy == LevelStrategy::Auto) {
-      LoadControlParameters once = load;
-      once.max_cuts = 0;
-      PetscCall(PetscPushErrorHandler(PetscReturnErrorHandler, nullptr));
-      const PetscErrorCode ierr = AdvanceToPressure(rigid, once, P_settle, &step, &rep);
-      PetscCall(PetscPopErrorHandler());
-      if (ierr == PETSC_ERR_NOT_CONVERGED) {
-        const PetscInt its = rep.newton_its;
-        LoadControlParameters hybrid = load;
-        hybrid.level.strategy = LevelStrategy::Hybrid;
-        step = -1.0;
-        PetscCall(AdvanceToPressure(rigid, hybrid, P_settle, &step, &rep));
-        rep.newton_its += its;
-      } else {
-        PetscCall(ierr);
-      }
-    } else {
-      PetscCall(AdvanceToPressure(rigid, load, P_settle, &step, &rep));
-    }
+    PetscCall(Settle(rigid, load, P_settle, &step, &rep));
     for (int i = 0; i < packing.size(); ++i) {
       double x[2];
       rigid.RigidPosition(i, x, nullptr);
@@ -389,7 +405,7 @@ PetscErrorCode Run(MPI_Comm comm) {
     if (level == 0 && opts.settle_frictionless && params.friction > 0.0) {
       const double P_settle = std::min(P, 1e-4 * params.young);
       problem.SetFrictionActive(false);
-      PetscCall(AdvanceToPressure(problem, load, P_settle, &step, &rep));
+      PetscCall(Settle(problem, load, P_settle, &step, &rep));
       problem.SetFrictionActive(true);
       SolveReport again;
       PetscCall(SolveLevel(problem, load.level, P_settle, &again));
