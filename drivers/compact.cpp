@@ -248,10 +248,6 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(params.SetFromOptions(comm));
   PetscCall(load.SetFromOptions(comm));
   if (HelpRequested()) PetscFunctionReturn(0);
-  PetscCheck(load.level.strategy != LevelStrategy::Interior || params.friction == 0.0, comm, PETSC_ERR_USER_INPUT,
-             "-level_solver interior solves frictionless levels only (the Coulomb law has no potential): use -friction 0, "
-             "or -level_solver hybrid, anchored or newton with -friction %g",
-             params.friction);
   PetscCall(CheckUnknownOptions(comm));
   // A user packing is read (and refused if bad) before anything is written;
   // its size and deformable area fraction stand for -n_particles and -kappa.

@@ -66,8 +66,8 @@ def scene_runs(a):
                     runs.append((s, f"n50_k{k:g}_mu{mu:g}", 1, ["-n_particles", "50", "-kappa", str(k), "-friction", str(mu),
                                                                "-pressures", p or CAMPAIGN_PRESSURES]))
         elif s == "frictionless":
-            # The frictionless scenes, where -level_solver interior applies: the default scene
-            # without friction and the four frictionless 50-disk campaign runs.
+            # The frictionless scenes: the default scene without friction and the
+            # four frictionless 50-disk campaign runs.
             runs.append((s, "n20_k0.5_mu0", 1, ["-options_file", os.path.join(ROOT, "petsc-options", "default.opts"),
                                                 "-friction", "0"]))
             for k in (0.2, 0.5, 0.8, 1.0):

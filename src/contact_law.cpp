@@ -38,20 +38,6 @@ NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n, doubl
   return r;
 }
 
-ClampedBarrier clamped_barrier(double s, double shat) {
-  ClampedBarrier r;
-  if (!(s > 0.0)) {
-    r.b = INFINITY;
-    return r;
-  }
-  if (s >= shat) return r;
-  const double d = s - shat, l = std::log(s / shat), h2 = shat * shat;
-  r.b = -d * d * l / h2;
-  r.psi = (2.0 * d * l + d * d / s) / h2;
-  r.dpsi = (2.0 * l + 4.0 * d / s - d * d / (s * s)) / h2;
-  return r;
-}
-
 TangentialNcp coulomb_ncp(double lambda_t, double lambda_n, double gap, double slip, double mu, double c_n,
                           double c_t, double tie) {
   TangentialNcp r;

@@ -153,17 +153,6 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
     const PairKinematics &k = lc.k;
     const int nd = k.ndof;
     NormalNcp ncp = normal_ncp(ncp_now_, lam_n, k.gap, c_n, kTouchingGap * mean_diameter_ * c_n);
-    if (barrier_mu_ > 0.0) {
-      // The barrier row of SetBarrier: lambda - mu psi(s) with its primal-dual
-      // Newton row (-lambda psi'(s) / psi(s)) ds + d lambda.
-      const double s = k.gap + barrier_eps_;
-      const ClampedBarrier bar = clamped_barrier(s, barrier_reach_);
-      if (F) merit_local_ += barrier_mu_ * bar.b;
-      ncp.value = std::isfinite(bar.b) ? lam_n - barrier_mu_ * bar.psi : NAN;
-      ncp.d_lambda = 1.0;
-      ncp.d_gap = bar.psi > 0.0 ? -lam_n * bar.dpsi / bar.psi : 0.0;
-      if (active) barrier_row_[2 * c] = ncp.d_gap, barrier_row_[2 * c + 1] = barrier_mu_ * bar.psi;
-    }
     TangentialNcp tan;
     if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t, kSlipTie * c_t * mean_diameter_);
     if (active) {

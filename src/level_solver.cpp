@@ -1,7 +1,5 @@
 #include "deformix/level_solver.hpp"
 
-#include "deformix/interior_point.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -13,7 +11,7 @@ namespace deformix {
 
 PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
   PetscInt choice = static_cast<PetscInt>(strategy);
-  const char *const names[] = {"newton", "anchored", "interior", "hybrid", "auto"};  // LevelStrategy order
+  const char *const names[] = {"newton", "anchored", "hybrid", "auto"};  // LevelStrategy order
   PetscInt merit_choice = static_cast<PetscInt>(merit);
   const char *const merits[] = {"residual", "energy"};  // LevelMerit order
   PetscFunctionBeginUser;
@@ -23,11 +21,9 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                               "Newton step per pseudo-time step, each step accepted by the residual of its proximal "
                               "subproblem) or anchored (pseudo-transient continuation, each pseudo-time step solved "
                               "until its residual has dropped 100-fold: -ptc_*) or hybrid (a newton attempt of -level_attempt_its linearizations "
-                              "from the tangent predictor, then anchored from where it stopped) or interior "
-                              "(frictionless levels only: primal-dual interior point on the enthalpy with a barrier on "
-                              "the gaps, then an exact active-set polish) or auto (newton with the energy merit on "
-                              "levels without friction, hybrid on frictional levels)",
-                              "", names, 5, names[choice], &choice, nullptr));
+                              "from the tangent predictor, then anchored from where it stopped) or auto (newton with the "
+                              "energy merit on levels without friction, hybrid on frictional levels)",
+                              "", names, 4, names[choice], &choice, nullptr));
   PetscCall(PetscOptionsEList("-level_merit",
                               "newton and hybrid's attempt (auto: its frictional levels): what accepts a step: residual (|G| of the proximal "
                               "subproblem decreases) or energy (|G| decreases, or the energy decreases: the enthalpy "
@@ -159,6 +155,23 @@ constexpr double kMoveGrowth = 1.25;
 // |F|_inf growing from 2 to 5e6 E <d> until -ptc_max_steps
 // (docs/level-solver.md, "Measured: the 50-disk campaign with auto").
 constexpr double kDivergedForce = 100.0;
+
+// Numeric factorization of J + shift D in ksp (newton shifts the body and
+// wall rows): J holds J + in_matrix D on entry (D = weight, the problem's
+// ShiftDiagonals), the difference is added (work: scratch); *ok,
+// *out_of_memory and *reason as FactorOnEveryRank's.
+PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift, double *in_matrix, bool *ok,
+                             bool *out_of_memory, PCFailedReason *reason) {
+  PetscFunctionBeginUser;
+  if (shift != *in_matrix) {
+    PetscCall(VecAXPBY(work, shift - *in_matrix, 0.0, weight));
+    PetscCall(MatDiagonalSet(J, work, ADD_VALUES));
+    *in_matrix = shift;
+  }
+  PetscCall(KSPSetOperators(ksp, J, J));
+  PetscCall(FactorOnEveryRank(ksp, ok, out_of_memory, reason));
+  PetscFunctionReturn(0);
+}
 
 // The iteration of one load step (level_solver.hpp, "newton").
 class MeritNewton {
@@ -429,7 +442,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         // the shift has to make that curvature positive: on rolling and
         // rearranging configurations K is indefinite. Tested on the step
         // itself (one product with the assembled matrix, which MUMPS's LU
-        // cannot give as an inertia), as the interior solver does.
+        // cannot give as an inertia).
         PetscCall(VecPointwiseMult(work_, d_, body_mask_));
         PetscCall(MatMult(J_, work_, Ft_));
         double curvature;
@@ -1051,23 +1064,6 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   PetscFunctionReturn(0);
 }
 
-}  // namespace
-
-PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift, double *in_matrix, bool *ok,
-                             bool *out_of_memory, PCFailedReason *reason) {
-  PetscFunctionBeginUser;
-  if (shift != *in_matrix) {
-    PetscCall(VecAXPBY(work, shift - *in_matrix, 0.0, weight));
-    PetscCall(MatDiagonalSet(J, work, ADD_VALUES));
-    *in_matrix = shift;
-  }
-  PetscCall(KSPSetOperators(ksp, J, J));
-  PetscCall(FactorOnEveryRank(ksp, ok, out_of_memory, reason));
-  PetscFunctionReturn(0);
-}
-
-namespace {
-
 PetscErrorCode SolveLevelBy(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
                             SolveReport *report) {
   PetscFunctionBeginUser;
@@ -1103,10 +1099,6 @@ PetscErrorCode SolveLevelBy(CompactionProblem &problem, const LevelSolverParamet
     AnchoredContinuation solver(problem, params, progress);
     PetscCall(solver.Solve(pressure, report, &first, left_open));
     report->factorizations = static_cast<int>(report->newton_its - first.newton_its) + first.factorizations;
-    PetscFunctionReturn(0);
-  }
-  if (params.strategy == LevelStrategy::Interior) {
-    PetscCall(SolveLevelInterior(problem, params, pressure, report));
     PetscFunctionReturn(0);
   }
   MeritNewton solver(problem, params, progress);

@@ -530,7 +530,6 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
     switch_margin_.assign(2 * candidates_.size(), 0.0);
     gap_bound_.assign(2 * candidates_.size(), 0.0);
     slip_now_.assign(candidates_.size(), 0.0);
-    barrier_row_.assign(2 * candidates_.size(), 0.0);
   }
   // Each rank assembles what it owns: the elements of its deformable disks,
   // the walls' load (rank 0), the proximal terms of its unknowns, the gauges
@@ -1031,32 +1030,6 @@ PetscErrorCode CompactionProblem::ShiftDiagonals(Vec floor, Vec weight) const {
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode CompactionProblem::BarrierRows(Vec gap, Vec stiffness, Vec target, Vec rows) const {
-  const std::initializer_list<Vec> out = {gap, stiffness, target, rows};
-  std::vector<PetscScalar *> a;
-  PetscFunctionBeginUser;
-  for (Vec v : out) {
-    PetscScalar *p;
-    PetscCall(VecSet(v, 0.0));
-    PetscCall(VecGetArray(v, &p));
-    a.push_back(p);
-  }
-  const bool have = gap_bound_.size() == 2 * candidates_.size() && barrier_row_.size() == 2 * candidates_.size();
-  for (size_t c = 0; c < candidates_.size(); ++c) {
-    if (CandidateOwner(candidates_[c]) != rank_) continue;  // its row is another rank's
-    const PetscInt row = petsc_of_[MultiplierOffset() + static_cast<PetscInt>(c)] - own_lo_;
-    if (have) {
-      a[0][row] = gap_bound_[2 * c] + barrier_eps_;
-      a[1][row] = barrier_row_[2 * c];
-      a[2][row] = barrier_row_[2 * c + 1];
-    }
-    a[3][row] = 1.0;
-  }
-  size_t i = 0;
-  for (Vec v : out) PetscCall(VecRestoreArray(v, &a[i++]));
-  PetscFunctionReturn(0);
-}
-
 PetscErrorCode FactorOnEveryRank(KSP ksp, bool *ok, bool *out_of_memory, PCFailedReason *reason) {
   PC pc;
   PCFailedReason local;
@@ -1404,7 +1377,6 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure, LoadPredictor p
   PetscFunctionBeginUser;
   layouts_at_step_ = layouts_created_;
   ncp_now_ = params_.ncp;
-  barrier_mu_ = barrier_eps_ = 0.0;
   step_saved_ = SaveState();
   step_saved_pressure_ = pressure_;
   const State &saved = step_saved_;
@@ -1447,7 +1419,6 @@ PetscErrorCode CompactionProblem::EndLoadStep(bool converged, SolveReport *repor
   PetscFunctionBeginUser;
   rho_anchor_ = 0.0;
   ncp_now_ = params_.ncp;
-  barrier_mu_ = barrier_eps_ = 0.0;
   if (!converged) {
     RestoreState(step_saved_);
     pressure_ = step_saved_pressure_;

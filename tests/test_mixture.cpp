@@ -477,13 +477,13 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFrictionPerNodeCriterion) {
 // pore, which closes (between P/E 0.01 and 0.02), and the rattler is pushed
 // to where the disks around it balance it. Asserted: the equilibrium it
 // reaches (Signorini, the virial identity, the rattler's net force, a load
-// carried by several contacts), the same with the four level solvers and
+// carried by several contacts), the same with the three level solvers and
 // with newton's energy merit; not how many iterations it takes.
 TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
-  double carried_by[5] = {0.0, 0.0, 0.0, 0.0, 0.0};
-  const char *const labels[] = {"newton", "anchored", "interior", "hybrid", "newton, energy merit"};  // LevelStrategy order, then newton's energy merit
-  for (int variant : {1, 0, 2, 3, 4}) {
-    const LevelStrategy strategy = variant == 4 ? LevelStrategy::Newton : static_cast<LevelStrategy>(variant);
+  double carried_by[4] = {0.0, 0.0, 0.0, 0.0};
+  const char *const labels[] = {"newton", "anchored", "hybrid", "newton, energy merit"};  // LevelStrategy order, then newton's energy merit
+  for (int variant : {1, 0, 2, 3}) {
+    const LevelStrategy strategy = variant == 3 ? LevelStrategy::Newton : static_cast<LevelStrategy>(variant);
     ProblemParameters p;
     p.deformable_contact = DeformableContact::Mortar;
     p.constrain_rotation = PETSC_TRUE;
@@ -499,7 +499,7 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
     problem.SetWalls(w);
     LoadControlParameters load;
     load.level.strategy = strategy;
-    if (variant == 4) load.level.merit = LevelMerit::Energy;
+    if (variant == 3) load.level.merit = LevelMerit::Energy;
     double step = -1.0;
     const char *label = labels[variant];
     for (double P : {1e-3, 0.05}) {
@@ -531,9 +531,8 @@ TEST(Mixture, RattlerIsCaughtWhenThePoreCloses) {
     }
   }
   EXPECT_NEAR(carried_by[0], carried_by[1], 1e-6 * carried_by[1]) << "newton and anchored reach the same equilibrium";
-  EXPECT_NEAR(carried_by[2], carried_by[1], 1e-6 * carried_by[1]) << "interior and anchored reach the same equilibrium";
-  EXPECT_NEAR(carried_by[3], carried_by[1], 1e-6 * carried_by[1]) << "hybrid and anchored reach the same equilibrium";
-  EXPECT_NEAR(carried_by[4], carried_by[1], 1e-6 * carried_by[1]) << "newton's energy merit and anchored reach the same equilibrium";
+  EXPECT_NEAR(carried_by[2], carried_by[1], 1e-6 * carried_by[1]) << "hybrid and anchored reach the same equilibrium";
+  EXPECT_NEAR(carried_by[3], carried_by[1], 1e-6 * carried_by[1]) << "newton's energy merit and anchored reach the same equilibrium";
 }
 
 // The symmetric form of the Newton matrix (problem.hpp, SymmetrizeNewtonMatrix):

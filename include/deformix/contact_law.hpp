@@ -60,19 +60,6 @@ struct NormalNcp {
 // round-off (which depends on the number of ranks and the factorization).
 NormalNcp normal_ncp(NcpFunction f, double lambda, double gap, double c_n, double tie = 0.0);
 
-// Clamped log barrier of the interior level solver (interior_point.hpp), in
-// the form of IPC's (Li et al., ACM TOG 39, 2020), scaled to behave as
-// -log(s) near s = 0:
-//     b(s) = -(s - shat)^2 / shat^2 log(s / shat)   for 0 < s < shat,
-//     b(s) = 0 for s >= shat, +inf for s <= 0.
-// It is C2 at shat, so a candidate that enters or leaves the contact list
-// beyond shat does not change the merit. psi = -b' >= 0 is the contact force
-// per unit barrier parameter, dpsi = psi' <= 0.
-struct ClampedBarrier {
-  double b = 0.0, psi = 0.0, dpsi = 0.0;
-};
-ClampedBarrier clamped_barrier(double s, double shat);
-
 enum ContactState { kOpen = 0, kClosed = 1, kSliding = 2 };
 
 // Value and generalized derivatives of the Coulomb NCP function.

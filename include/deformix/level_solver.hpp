@@ -49,8 +49,8 @@
 //   the friction a Tresca dissipation with the normal forces lagged at the
 //   iterate (s_c the incremental slip). For it the step must descend, so the
 //   shift grows (a factorization each) until d_x^T (K + rho D) d_x > 0 on
-//   the step's body and wall part: the inertia-free test of the interior
-//   solver, since MUMPS's LU gives no inertia. The energy alone is not
+//   the step's body and wall part (one product with the assembled matrix;
+//   MUMPS's LU gives no inertia). The energy alone is not
 //   enough: steps that close an open contact or slip against a lagged bound
 //   cross a kink of psi, and are the ones |G| accepts.
 //   PETSc's SNESNEWTONTR does not fit: its trust region is a dogleg in the
@@ -97,9 +97,6 @@
 //   does not, anchored goes on from the attempt's last iterate if no body
 //   overlaps there by more than 1e-3 <d> (else from the undone load step),
 //   and the level counts the iterations of both.
-// interior: frictionless levels as a constrained minimization of the
-//   enthalpy by a primal-dual interior-point method, then an exact
-//   active-set polish (interior_point.hpp).
 // auto (the default): newton with the energy merit on levels without
 //   friction (a frictionless packing, and the frictionless settling level of
 //   a frictional one), where the enthalpy is the exact potential; hybrid
@@ -110,7 +107,7 @@
 
 namespace deformix {
 
-enum class LevelStrategy : int { Newton = 0, Anchored = 1, Interior = 2, Hybrid = 3, Auto = 4 };
+enum class LevelStrategy : int { Newton = 0, Anchored = 1, Hybrid = 2, Auto = 3 };
 // What tests a step of newton (and of hybrid's attempt): the residual of the
 // proximal subproblem, or the energy (level_solver.hpp, newton).
 enum class LevelMerit : int { Residual = 0, Energy = 1 };
@@ -130,13 +127,6 @@ struct LevelSolverParameters {
   PetscBool newton_monitor_contacts = PETSC_FALSE;  // anchored: -newton_monitor_contacts
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
-
-// Numeric factorization of J + shift D in ksp, for the strategies that
-// shift the body and wall rows (newton, interior): J holds J + in_matrix D
-// on entry (D = weight, the problem's ShiftDiagonals), the difference is
-// added (work: scratch); *ok, *out_of_memory and *reason as FactorOnEveryRank's.
-PetscErrorCode FactorShifted(Mat J, KSP ksp, Vec weight, Vec work, double shift, double *in_matrix, bool *ok,
-                             bool *out_of_memory = nullptr, PCFailedReason *reason = nullptr);
 
 // Solves equilibrium at pressure P from the problem's current state. On
 // success the state is updated; on failure it is left unchanged.

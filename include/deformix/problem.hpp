@@ -247,7 +247,7 @@ class CompactionProblem {
   PetscErrorCode BeginLoadStep(double pressure) { return BeginLoadStep(pressure, params_.predictor, kPredictionOverlap); }
   PetscErrorCode BeginLoadStep(double pressure, LoadPredictor predictor, double overlap_limit);
   // The deepest overlap of a predicted state, in <d>, for strategies whose
-  // first steps are strongly damped (anchored, interior).
+  // first steps are strongly damped (anchored).
   static constexpr double kPredictionOverlap = 1e-3;
   // How far a Newton step may drive an open contact into penetration, in
   // <d> (ContactStepFraction): the next linearization closes it. The energy
@@ -289,22 +289,10 @@ class CompactionProblem {
   double AnchorWeight() const { return rho_anchor_; }
   // NCP function of the normal contact rows until the load step ends.
   void UseNcpFunction(NcpFunction f) { ncp_now_ = f; }
-  // Barrier form of the normal contact rows (the interior level solver,
-  // interior_point.hpp) until the load step ends. With mu > 0 the row of
-  // candidate c is
-  //     lambda_c - mu psi(g_c + eps),
-  // psi = -b' of the clamped log barrier b of reach shat (contact_law.hpp):
-  // zero on the central path, where lambda_c is the barrier's force. Its
-  // Newton row is the primal-dual one, k_c dg + d lambda_c with k_c =
-  // -lambda_c psi' / psi (for the plain log barrier, lambda (g + eps) = mu
-  // linearized and divided by g + eps). eps relaxes g >= 0 so that touching
-  // contacts are interior. mu = 0: the NCP rows.
-  void SetBarrier(double mu, double eps, double shat) { barrier_mu_ = mu, barrier_eps_ = eps, barrier_reach_ = shat; }
-  // The merit of the interior level solver at the last residual evaluation:
-  // the enthalpy H = sum of the deformable disks' strain energies + P x box
-  // area, plus mu sum_c b(g_c + eps) with SetBarrier; +inf when a gap is
-  // outside the barrier's domain or an element inverted. Frictionless
-  // equilibria are its constrained stationary points (the rows of F).
+  // The enthalpy H = sum of the deformable disks' strain energies + P x box
+  // area at the last residual evaluation (+inf where an element inverted):
+  // frictionless equilibria are its constrained stationary points (the
+  // rows of F); the energy merit of newton is built on it.
   double Merit() const { return merit_; }
   // The contact part of the energy merit of the newton strategy
   // (level_solver.hpp, -level_merit energy). LagContactWeights fixes, from
@@ -325,10 +313,6 @@ class CompactionProblem {
   PetscErrorCode ContactPenalty(double *penetration, double *dissipation) const;
   // Largest normal multiplier of z (collective).
   PetscErrorCode LargestNormalMultiplier(Vec z, double *largest) const;
-  // At the last residual evaluation, on the normal-multiplier rows (0 on the
-  // others): g_c + eps, the stiffness k_c and the barrier force mu psi of
-  // SetBarrier; rows: 1 on the normal-multiplier rows.
-  PetscErrorCode BarrierRows(Vec gap, Vec stiffness, Vec target, Vec rows) const;
   // Prefix of the options of this problem's solvers (KSP, PC, and the level
   // solver's SNES): e.g. "settle_" for -settle_snes_*, -settle_ksp_*. Empty
   // by default (-snes_*, -ksp_*). Takes effect with the next layout.
@@ -486,8 +470,8 @@ class CompactionProblem {
   // (docs/level-solver.md, "Measured: LDL^T against LU").
   // SymmetrizeNewtonMatrix turns J (NewtonMatrix's, not yet shifted) into
   // J_s and keeps what SymmetricRhs needs; *done is false, and J unchanged,
-  // where the form does not apply (friction acting, Fischer-Burmeister or
-  // barrier rows). Collective.
+  // where the form does not apply (friction acting, Fischer-Burmeister
+  // rows). Collective.
   PetscErrorCode SymmetrizeNewtonMatrix(Mat J, bool *done);
   // bs = S L b for the last SymmetrizeNewtonMatrix.
   PetscErrorCode SymmetricRhs(Vec b, Vec bs);
@@ -606,8 +590,6 @@ class CompactionProblem {
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
   std::vector<PetscScalar> coo_values_;
   NcpFunction ncp_now_ = NcpFunction::Min;  // NCP function of the current load step (UseNcpFunction)
-  double barrier_mu_ = 0.0, barrier_eps_ = 0.0, barrier_reach_ = 0.0;  // SetBarrier
-  std::vector<double> barrier_row_;               // per candidate, at the last residual: k_c and mu psi (own contacts; BarrierRows)
   double merit_ = 0.0;                            // Merit(): summed over ranks by FormResidual
   double merit_local_ = 0.0;                      // this rank's part, accumulated by Assemble
   std::string options_prefix_;               // of the KSP (and the level solver's SNES)
