@@ -24,6 +24,9 @@ Cases
                     a CSV file keeps phi = pi/4 with P d at every contact; bad files
                     (empty, missing or unknown column, text, radius <= 0, overlaps)
                     are refused with a clear message before anything is written
+  settle            the default scene with -level_max_its 1: auto's newton cannot do
+                    the rigid or the frictionless settling in one load step, hybrid
+                    does each from the state before it, and the run completes
   progress          12 disks: with -progress_interval 0 a progress line follows every
                     pseudo-time step, on 1 and on 2 ranks (printed once); the last
                     line of each sub-step counts its Newton iterations, and per
@@ -304,12 +307,28 @@ def progress_case(driver, workdir, mpiexec):
     check(rc == 0 and not any(map(PROGRESS_RE.match, text.splitlines())), "-progress_interval -1: no progress lines")
 
 
+def settle_case(driver, workdir):
+    """auto's newton limited to one linearization per load step
+    (-level_max_its 1) cannot settle the default scene, neither its rigid
+    pre-settling nor the frictionless settling of the mixture: each
+    settling must then be solved by hybrid from the state before it (without
+    that, every step cut of the settling fails and compact stops). The levels
+    that follow are frictional (hybrid), so the run completes; every level
+    must pass the acceptance checks of run_compact."""
+    default_opts = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "petsc-options", "default.opts")
+    rows = run_compact(driver, os.path.join(workdir, "max-its-1"), [1e-4, 1e-3], timeout=600,
+                       scene=["-options_file", default_opts], extra=["-level_max_its", "1", "-checkpoint", "false"])
+    if rows:
+        check(rows[0]["newton_its"] > 1, f"the settling level took {rows[0]['newton_its']:.0f} > 1 Newton iterations"
+                                         " (hybrid after newton's single linearization)")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--driver", required=True)
     ap.add_argument("--workdir", required=True)
     ap.add_argument("--mpiexec", default="mpirun")
-    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart", "progress", "packing"])
+    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart", "progress", "packing", "settle"])
     a = ap.parse_args()
     os.makedirs(a.workdir, exist_ok=True)
     if a.case == "friction-to-half":
@@ -341,6 +360,8 @@ def main():
         progress_case(a.driver, a.workdir, a.mpiexec)
     elif a.case == "packing":
         packing_case(a.driver, a.workdir)
+    elif a.case == "settle":
+        settle_case(a.driver, a.workdir)
     else:
         rows = run_compact(a.driver, os.path.join(a.workdir, "jump"), [0.1], timeout=900)
         ref = run_compact(a.driver, os.path.join(a.workdir, "stepped"), [1e-4, 1e-3, 0.01, 0.05, 0.1], timeout=900)
