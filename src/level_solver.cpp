@@ -43,7 +43,7 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "operations that keep its solution, by MUMPS LDL^T (false: LU)",
                              "", ldlt, &ldlt, nullptr));
   PetscCall(PetscOptionsBool("-level_monitor",
-                             "newton: one line per trial step (|F|, merit |G| before and after, largest force, trust "
+                             "newton: one line per trial step (phi of the iterate, |F|, merit |G| before and after, largest force, trust "
                              "radius, shift, step fraction and length, accepted or rejected, closed and sliding contacts, "
                              "residual by block) and the level criterion's balances",
                              "", monitor, &monitor, nullptr));
@@ -279,7 +279,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
     PetscFunctionBeginUser;
     PetscCall(p_.AdoptState(z_));
     phi_before = phi;
-    if (relaxed_tol > 0.0) phi = p_.PackingFraction();
+    if (relaxed_tol > 0.0 || prm_.monitor) phi = p_.PackingFraction();
     PetscFunctionReturn(0);
   };
   const auto at_iterate = [&]() -> PetscErrorCode {
@@ -539,11 +539,11 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
             double moves[3];
             PetscCall(p_.StepMoves(z_, s_, moves));
             PetscCall(PetscPrintf(comm_,
-                                  "    newton %3" PetscInt_FMT "  |F| %.3e  |G| %.3e -> %.3e (trial |F| %.3e)  |F|_inf %.2e  "
+                                  "    newton %3" PetscInt_FMT "  phi %.8f  |F| %.3e  |G| %.3e -> %.3e (trial |F| %.3e)  |F|_inf %.2e  "
                                   "m %.1e rho %.1e  alpha %.3f |s| %.1e (translation %.1e rotation %.1e deformation %.1e)  %s  "
                                   "closed %d (+%d -%d) sliding %d  "
                                   "(trial rows: body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e)",
-                                  report->newton_its, fnorm, gnorm, trial_gnorm, trial_norm, force, move, rho, alpha, step,
+                                  report->newton_its, phi, fnorm, gnorm, trial_gnorm, trial_norm, force, move, rho, alpha, step,
                                   moves[0], moves[1], moves[2], accepted ? "accepted" : "rejected", closed, closing, opening,
                                   sliding, blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]));
             if (energy_step)
