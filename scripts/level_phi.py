@@ -2,8 +2,7 @@
 """When does phi settle within a level? From compact runs with -level_monitor.
 
 For every level of a run without friction (-level_solver auto solves them
-by newton iterations only; a settling before the first level is counted with
-it), the packing fraction of every
+by newton iterations only), the packing fraction of every
 iterate is read from the -level_monitor lines of the run's log and compared
 with the level's final phi (curve.csv): the first iterate from which phi stays
 within 1e-4 (the paper's criterion) and within 1e-5 of its final value,
@@ -66,6 +65,8 @@ def main():
         for phis, c in zip(levels, curve):
             if not phis:
                 sys.exit(f"{log}: no -level_monitor lines for P/E {c['P_over_E']}")
+            its = int(c["newton_its"])
+            phis = phis[-its:]  # the level's own iterations (a settling before the first level is left out)
             final = float(c["phi"])
             rows.append({"run": label, "P_over_E": c["P_over_E"], "newton_its": int(c["newton_its"]),
                          "monitored_its": len(phis), "settled_1e-4_from": settled_from(phis, final, 1e-4),
