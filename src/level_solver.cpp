@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstdint>
 #include <deque>
 #include <initializer_list>
@@ -1024,15 +1025,22 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
                             outer, (double)true_norm, part[0], part[1], part[2], part[3], part[4], force_residual, phi, move, its,
                             stale ? "  (candidates refreshed)" : ""));
     }
-    if (!prm_.ptc_monitor)
-      PetscCall(progress_.Step(comm_, pressure, steps_before + outer + 1, report->newton_its, force_residual));
     report->force_residual = force_residual;
     const bool settled = !stale && p_.ActiveSet() == active_inner;
+    // The parts of the level criterion other than |F|_inf, on the heartbeat
+    // line, so that a long sub-step says what keeps it from being accepted.
+    const double ncp_norm = std::hypot(part[3], part[4]);
+    if (!prm_.ptc_monitor) {
+      char parts[160], change[32] = "-";
+      if (phi_last > 0.0) std::snprintf(change, sizeof change, "%.1e", std::abs(phi - phi_last) / phi);
+      std::snprintf(parts, sizeof parts, ", contact rows %.1e (exact below %.0e), contact states %s, phi change %s",
+                    ncp_norm, atol, settled ? "settled" : "changing", change);
+      PetscCall(progress_.Step(comm_, pressure, steps_before + outer + 1, report->newton_its, force_residual, parts));
+    }
     if (settled && true_norm <= atol) break;  // exact equilibrium
     // The paper's level criterion: unbalanced forces small compared with the
     // contact forces (P <d>), the packing fraction no longer changing, and
     // the contact conditions (Signorini, Coulomb) still satisfied exactly.
-    const double ncp_norm = std::hypot(part[3], part[4]);
     const double f_tol = pp.level_force_rtol * pressure * dmean;
     if (settled && pp.level_force_rtol > 0.0 && force_residual <= f_tol && ncp_norm <= atol &&
         std::abs(phi - phi_last) <= pp.level_phi_rtol * phi) {

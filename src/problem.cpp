@@ -89,7 +89,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "", ptc_retry_fb, &ptc_retry_fb, nullptr));
   PetscCall(PetscOptionsReal("-progress_interval",
                              "seconds between progress lines (pressure, pseudo-time step, Newton iterations, residual, "
-                             "phi) while a sub-step runs long; 0: after every pseudo-time step, negative: none",
+                             "phi; in anchored also the contact rows, whether the contact states settled, and phi's change) while "
+                             "a sub-step runs long; 0: after every pseudo-time step, negative: none",
                              "", progress_interval, &progress_interval, nullptr));
   PetscCall(PetscOptionsReal("-contact_margin", "contact candidates: gap below margin x mean diameter", "",
                              contact_margin, &contact_margin, nullptr));
