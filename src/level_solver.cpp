@@ -1034,13 +1034,13 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       CompactionProblem::Balance b;
       PetscCall(p_.BodyBalance(F_, &b));
       const double pd = std::max(pressure, 1e-300) * dmean;
-      char parts[200], change[32] = "-";
+      char parts[240], change[32] = "-";
       if (phi_last > 0.0) std::snprintf(change, sizeof change, "%.1e", std::abs(phi - phi_last) / phi);
       std::snprintf(parts, sizeof parts,
-                    ", largest body force %.1e and torque %.1e P<d>(^2), contact rows %.1e (exact below %.0e), "
-                    "contact states %s, phi change %s",
-                    b.body_force / pd, b.body_torque / (pd * dmean), ncp_norm, atol, settled ? "settled" : "changing",
-                    change);
+                    ", largest body force %.1e (particle %d, %s) and torque %.1e P<d>(^2), contact rows %.1e (exact "
+                    "below %.0e), contact states %s, phi change %s",
+                    b.body_force / pd, b.body_force_particle, b.body_force_deformable ? "deformable" : "rigid",
+                    b.body_torque / (pd * dmean), ncp_norm, atol, settled ? "settled" : "changing", change);
       PetscCall(progress_.Step(comm_, pressure, steps_before + outer + 1, report->newton_its, force_residual, parts));
     }
     if (settled && true_norm <= atol) break;  // exact equilibrium

@@ -362,6 +362,8 @@ class CompactionProblem {
   // largest contact row. Collective.
   struct Balance {
     double body_force = 0.0, body_torque = 0.0, node_force = 0.0, contact_row = 0.0;
+    int body_force_particle = -1;  // the particle with the largest net force
+    bool body_force_deformable = false;
   };
   PetscErrorCode BodyBalance(Vec F, Balance *balance) const;
   // The balance of the current state's residual (collective).
