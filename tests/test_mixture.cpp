@@ -400,6 +400,49 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
 // (here residual, with an attempt of 30) once friction acts: the same Newton
 // iterations, factorizations and state, to the last bit, as those two
 // strategies chosen by hand.
+// BodyBalance names the particle with the largest net force (the progress
+// lines of a long sub-step print it): a residual with a uniform force on the
+// nodes of one deformable disk, then a larger one on a rigid disk.
+TEST(Mixture, BodyBalanceNamesTheParticleWithTheLargestNetForce) {
+  int n_def = 0;
+  auto scene = TwentyDiskMixture(DeformableContact::NodeToSegment, PETSC_FALSE, &n_def);
+  ASSERT_TRUE(scene);
+  CompactionProblem &problem = *scene;
+  Vec z, F;
+  Mat J;
+  KSP ksp;
+  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
+  PetscInt lo, hi;
+  ASSERT_PETSC(VecGetOwnershipRange(F, &lo, &hi));
+  const auto set = [&](PetscInt natural, double value) {
+    const PetscInt i = problem.PetscIndex(natural);
+    if (i >= lo && i < hi) ASSERT_PETSC(VecSetValue(F, i, value, INSERT_VALUES));
+  };
+  ASSERT_GE(problem.Bodies().size(), 2u);
+  ASSERT_GE(problem.RigidBodies().size(), 1u);
+  const DeformableBody &body = problem.Bodies()[1];
+  const int nn = body.mesh.num_nodes();
+  ASSERT_PETSC(VecZeroEntries(F));
+  for (int a = 0; a < nn; ++a) set(body.dof_offset + 2 * a + 1, 1e-6);
+  ASSERT_PETSC(VecAssemblyBegin(F));
+  ASSERT_PETSC(VecAssemblyEnd(F));
+  CompactionProblem::Balance b;
+  ASSERT_PETSC(problem.BodyBalance(F, &b));
+  EXPECT_NEAR(b.body_force, nn * 1e-6, 1e-12);
+  EXPECT_EQ(b.body_force_particle, body.particle);
+  EXPECT_TRUE(b.body_force_deformable);
+  EXPECT_NEAR(b.node_force, 1e-6, 1e-15);
+
+  const RigidBody &rigid = problem.RigidBodies()[0];
+  set(rigid.dof_offset, 2.0 * nn * 1e-6);
+  ASSERT_PETSC(VecAssemblyBegin(F));
+  ASSERT_PETSC(VecAssemblyEnd(F));
+  ASSERT_PETSC(problem.BodyBalance(F, &b));
+  EXPECT_NEAR(b.body_force, 2.0 * nn * 1e-6, 1e-12);
+  EXPECT_EQ(b.body_force_particle, rigid.particle);
+  EXPECT_FALSE(b.body_force_deformable);
+}
+
 TEST(Mixture, AutoLevelSolverChoosesByFriction) {
   struct Run {
     PetscInt its[2] = {0, 0};
