@@ -97,21 +97,36 @@ PetscErrorCode DestroyAll(std::initializer_list<Vec *> vecs) {
 class Progress {
  public:
   explicit Progress(CompactionProblem &problem) : p_(problem) { PetscTime(&t_start_), t_last_ = t_start_; }
-  PetscErrorCode Step(MPI_Comm comm, double pressure, int step, PetscInt its, double force, const char *extra = "") {
-    const ProblemParameters &pp = p_.Parameters();
+  // Whether a line is due now (collective); a caller that adds parts to the
+  // line computes them only then.
+  PetscErrorCode Due(MPI_Comm comm, bool *due) {
     PetscFunctionBeginUser;
-    if (pp.progress_interval < 0.0) PetscFunctionReturn(0);
+    *due = false;
+    if (p_.Parameters().progress_interval < 0.0) PetscFunctionReturn(0);
     PetscLogDouble now;
     PetscCall(PetscTime(&now));
-    int due = now - t_last_ >= pp.progress_interval;
-    PetscCallMPI(MPI_Bcast(&due, 1, MPI_INT, 0, comm));
-    if (!due) PetscFunctionReturn(0);
-    t_last_ = now;
+    int is_due = now - t_last_ >= p_.Parameters().progress_interval;
+    PetscCallMPI(MPI_Bcast(&is_due, 1, MPI_INT, 0, comm));
+    if (is_due) t_last_ = now;
+    *due = is_due != 0;
+    PetscFunctionReturn(0);
+  }
+  // The line (after Due said so).
+  PetscErrorCode Print(MPI_Comm comm, double pressure, int step, PetscInt its, double force, const char *extra = "") {
+    const ProblemParameters &pp = p_.Parameters();
+    PetscFunctionBeginUser;
     PetscCall(PetscPrintf(comm,
                           "    ... P/E %.4g: pseudo-time step %d, %" PetscInt_FMT " Newton its, |F|_inf %.2e P<d>"
                           " (level criterion %.0e), phi %.6f%s, %.0f s in this sub-step\n",
                           pressure / pp.young, step, its, force / (std::max(pressure, 1e-300) * p_.MeanDiameter()),
-                          pp.level_force_rtol, p_.PackingFraction(), extra, now - t_start_));
+                          pp.level_force_rtol, p_.PackingFraction(), extra, t_last_ - t_start_));
+    PetscFunctionReturn(0);
+  }
+  PetscErrorCode Step(MPI_Comm comm, double pressure, int step, PetscInt its, double force, const char *extra = "") {
+    bool due;
+    PetscFunctionBeginUser;
+    PetscCall(Due(comm, &due));
+    if (due) PetscCall(Print(comm, pressure, step, its, force, extra));
     PetscFunctionReturn(0);
   }
 
@@ -1030,7 +1045,9 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     // The parts of the level criterion other than |F|_inf, on the heartbeat
     // line, so that a long sub-step says what keeps it from being accepted.
     const double ncp_norm = std::hypot(part[3], part[4]);
-    if (!prm_.ptc_monitor && pp.progress_interval >= 0.0) {
+    bool due = false;
+    if (!prm_.ptc_monitor) PetscCall(progress_.Due(comm_, &due));
+    if (due) {
       CompactionProblem::Balance b;
       PetscCall(p_.BodyBalance(F_, &b));
       const double pd = std::max(pressure, 1e-300) * dmean;
@@ -1041,7 +1058,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
                     "below %.0e), contact states %s, phi change %s",
                     b.body_force / pd, b.body_force_particle, b.body_force_deformable ? "deformable" : "rigid",
                     b.body_torque / (pd * dmean), ncp_norm, atol, settled ? "settled" : "changing", change);
-      PetscCall(progress_.Step(comm_, pressure, steps_before + outer + 1, report->newton_its, force_residual, parts));
+      PetscCall(progress_.Print(comm_, pressure, steps_before + outer + 1, report->newton_its, force_residual, parts));
     }
     if (settled && true_norm <= atol) break;  // exact equilibrium
     // The paper's level criterion: unbalanced forces small compared with the

@@ -2,7 +2,6 @@
 #include "deformix/partition.hpp"
 
 #include <algorithm>
-#include <climits>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -1165,16 +1164,16 @@ PetscErrorCode CompactionProblem::BodyBalance(Vec Fv, Balance *balance) const {
       torque += (x[0] - c[0]) * fa[1] - (x[1] - c[1]) * fa[0];
       b.node_force = std::max(b.node_force, std::max(std::abs(fa[0]), std::abs(fa[1])));
     }
-    if (std::hypot(net[0], net[1]) > b.body_force)
-      b.body_force = std::hypot(net[0], net[1]), b.body_force_particle = body.particle, b.body_force_deformable = true;
+    const double force = std::hypot(net[0], net[1]);
+    if (force > b.body_force) b.body_force = force, b.body_force_particle = body.particle, b.body_force_deformable = true;
     b.body_torque = std::max(b.body_torque, std::abs(torque));
   }
   for (const RigidBody &r : rigid_) {
     if (ParticleOwner(r.particle) != rank_) continue;
     const double fx = local(r.dof_offset), fy = local(r.dof_offset + 1);
     const double torque = Frictional() ? std::abs(local(r.dof_offset + 2)) : 0.0;
-    if (std::hypot(fx, fy) > b.body_force)
-      b.body_force = std::hypot(fx, fy), b.body_force_particle = r.particle, b.body_force_deformable = false;
+    const double force = std::hypot(fx, fy);
+    if (force > b.body_force) b.body_force = force, b.body_force_particle = r.particle, b.body_force_deformable = false;
     b.body_torque = std::max(b.body_torque, torque);
     b.node_force = std::max({b.node_force, std::abs(fx), std::abs(fy), torque / r.radius});
   }
@@ -1184,17 +1183,19 @@ PetscErrorCode CompactionProblem::BodyBalance(Vec Fv, Balance *balance) const {
     if (n >= MultiplierOffset()) b.contact_row = std::max(b.contact_row, std::abs(f[i - own_lo_]));
   }
   PetscCall(VecRestoreArrayRead(Fv, &f));
-  double largest[4] = {b.body_force, b.body_torque, b.node_force, b.contact_row}, all[4];
-  PetscCallMPI(MPI_Allreduce(largest, all, 4, MPI_DOUBLE, MPI_MAX, comm_));
-  // The particle with the largest net force: the lowest particle index among
-  // the ranks that hold that force, so that every rank names the same one.
-  int who[2] = {b.body_force == all[0] && b.body_force_particle >= 0 ? b.body_force_particle : INT_MAX, 0};
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &who[0], 1, MPI_INT, MPI_MIN, comm_));
-  who[1] = who[0] == b.body_force_particle && b.body_force_deformable ? 1 : 0;
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &who[1], 1, MPI_INT, MPI_MAX, comm_));
-  balance->body_force = all[0], balance->body_torque = all[1], balance->node_force = all[2], balance->contact_row = all[3];
-  balance->body_force_particle = who[0] == INT_MAX ? -1 : who[0];
-  balance->body_force_deformable = who[1] != 0;
+  // The largest net force and its particle (2 particle + 1 if deformable;
+  // MAXLOC takes the lowest on a tie, so every rank names the same one).
+  struct {
+    double value;
+    int where;
+  } largest{b.body_force, 2 * b.body_force_particle + (b.body_force_deformable ? 1 : 0)};
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &largest, 1, MPI_DOUBLE_INT, MPI_MAXLOC, comm_));
+  double rest[3] = {b.body_torque, b.node_force, b.contact_row};
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, rest, 3, MPI_DOUBLE, MPI_MAX, comm_));
+  balance->body_force = largest.value, balance->body_torque = rest[0], balance->node_force = rest[1];
+  balance->contact_row = rest[2];
+  balance->body_force_particle = largest.where < 0 ? -1 : largest.where / 2;
+  balance->body_force_deformable = largest.where >= 0 && largest.where % 2 == 1;
   PetscFunctionReturn(0);
 }
 
