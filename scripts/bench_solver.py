@@ -85,7 +85,7 @@ def scene_runs(a):
                                                             "-pressures", p or CAMPAIGN_PRESSURES]))
         elif s == "paper1500":
             # The rotation gauges during the frictionless settling: without them that
-            # level of this scene does not converge (docs/level-solver.md).
+            # level of this scene does not converge (docs/level-solver-measurements.md).
             opts = ["-options_file", os.path.join(ROOT, "petsc-options", "paper.opts"), "-kappa", "0.5", "-friction", "0.2",
                     "-constrain_rotation", "true"]
             runs.append((s, "n1500_k0.5_mu0.2", a.ranks, opts + (["-pressures", p] if p else [])))

@@ -7,7 +7,7 @@ curve.csv) and every deformable disk, the rotation of its nodes about their
 centroid (least squares: theta = sum r x dr / sum |r|^2) times the disk's
 radius, in units of the boundary node spacing h = 2 pi R / (boundary nodes).
 A Newton step that rolls a deformable disk is accurate over about a
-twentieth of h (docs/level-solver.md, "Measured: why a level takes tens of
+twentieth of h (docs/level-solver-measurements.md, "Measured: why a level takes tens of
 Newton iterations"), so a level whose disks roll by about h takes tens of
 iterations whatever the globalization.
 

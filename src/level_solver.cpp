@@ -145,20 +145,20 @@ constexpr double kAttemptOverlap = 0.1; // hybrid: deepest overlap of the newton
 // twentieth of the boundary node spacing (a step of 3e-3 <d> can raise the
 // residual tenfold with an exact Jacobian), so a monotone test halves the
 // step again and again where a full step raises the energy slightly and the
-// next one lowers it for good (docs/level-solver.md, "Measured: the
+// next one lowers it for good (docs/level-solver-measurements.md, "Measured: the
 // nonmonotone energy test").
 constexpr size_t kNonmonotoneWindow = 4;
 
 // anchored's inexact pseudo-time steps: an inner solve ends once it has
 // reduced |G| by this factor (or at the exact tolerance). Measured on the
-// frictional scenes against exact inner solves (docs/level-solver.md,
+// frictional scenes against exact inner solves (docs/level-solver-measurements.md,
 // "Measured: inexact pseudo-time steps"): 0.01 and 0.1 both take fewer
 // iterations, 0.01 the fewest.
 constexpr double kInnerForcing = 1e-2;
 // anchored's move m grows by this factor after an easy pseudo-time step and
 // is divided by 4 after a failed one; the fraction of failed steps settles
 // near ln g / (ln g + ln 4), each failure costing ptc_stall_its iterations
-// and a retry. Measured on the same scenes (docs/level-solver.md): 1.25 and
+// and a retry. Measured on the same scenes (docs/level-solver-measurements.md): 1.25 and
 // 1.5 took 3396 and 3414 iterations against 3631 with 2.
 constexpr double kMoveGrowth = 1.25;
 // anchored gives a sub-step up (the load controller cuts it) once its force
@@ -169,7 +169,7 @@ constexpr double kMoveGrowth = 1.25;
 // by a few per cent per step: measured on n50_k0.2_mu0.2 at P/E 0.5, one
 // sub-step went on for 900 pseudo-time steps (5400 Newton iterations) with
 // |F|_inf growing from 2 to 5e6 E <d> until -ptc_max_steps
-// (docs/level-solver.md, "Measured: the 50-disk campaign with auto").
+// (docs/level-solver-measurements.md, "Measured: the 50-disk campaign with auto").
 constexpr double kDivergedForce = 100.0;
 
 // Numeric factorization of J + shift D in ksp (newton shifts the body and

@@ -958,7 +958,7 @@ PetscErrorCode CompactionProblem::CreateFactorKsp(PCType factor, const char *pre
   // gauge rows by E / R, shifts by the weights D), and MUMPS's scaling,
   // recomputed at every numeric factorization, took 8 % of a 50-disk run
   // (perf) without changing its Newton iterations or phi
-  // (docs/level-solver.md, "Measured: the cost of an iteration").
+  // (docs/level-solver-measurements.md, "Measured: the cost of an iteration").
   PetscBool icntl8_set = PETSC_FALSE;
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_14", &icntl14_set));
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_8", &icntl8_set));

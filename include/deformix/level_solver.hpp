@@ -101,7 +101,7 @@
 //   friction (a frictionless packing, and the frictionless settling level of
 //   a frictional one), where the enthalpy is the exact potential; hybrid
 //   (with -level_merit) on frictional levels, where steps accepted by the
-//   energy with lagged normal forces can undo each other (docs/level-solver.md).
+//   energy with lagged normal forces can undo each other (docs/level-solver-measurements.md).
 #pragma once
 #include "deformix/problem.hpp"
 

@@ -469,7 +469,7 @@ class CompactionProblem {
   //     J_s = S L J,  J_s d = S L b  <=>  J d = b,
   // with the body and wall block, and so the curvature of any step, unchanged.
   // J_s is factored by MUMPS LDL^T (SymmetricKsp), cheaper than LU
-  // (docs/level-solver.md, "Measured: LDL^T against LU").
+  // (docs/level-solver-measurements.md, "Measured: LDL^T against LU").
   // SymmetrizeNewtonMatrix turns J (NewtonMatrix's, not yet shifted) into
   // J_s and keeps what SymmetricRhs needs; *done is false, and J unchanged,
   // where the form does not apply (friction acting, Fischer-Burmeister
