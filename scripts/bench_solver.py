@@ -18,8 +18,10 @@ Scenes (--scenes):
   frictionless  the default scene with friction 0 and the four frictionless 50-disk runs
   frictional  the default scene and the four frictional (0.2) 50-disk runs
   large400    400 disks, kappa 0.5 friction 0.2 and kappa 1 friction 0
+  paper200    petsc-options/paper.opts with 200 disks (kappa 0.5, friction 0.2): the paper's scene and load
+              path at a size whose levels take seconds to a minute
   paper1500   petsc-options/paper.opts (1500 disks, kappa 0.5, friction 0.2, -constrain_rotation true) on --ranks ranks
---pressures replaces the pressure list of the 50-, 400- and 1500-disk runs.
+--pressures replaces the pressure list of the 50-, 200-, 400- and 1500-disk runs.
 
 Outputs: <out>.csv (one row per level and run; '#' lines: machine, commit,
 command) and <out>.png (Newton iterations per level and seconds per run).
@@ -83,6 +85,10 @@ def scene_runs(a):
             for k, mu in ((0.5, 0.2), (1.0, 0.0)):
                 runs.append((s, f"n400_k{k:g}_mu{mu:g}", 1, ["-n_particles", "400", "-kappa", str(k), "-friction", str(mu),
                                                             "-pressures", p or CAMPAIGN_PRESSURES]))
+        elif s == "paper200":
+            runs.append((s, "n200_k0.5_mu0.2", 1, ["-options_file", os.path.join(ROOT, "petsc-options", "paper.opts"),
+                                                   "-n_particles", "200", "-kappa", "0.5", "-friction", "0.2"]
+                         + (["-pressures", p] if p else [])))
         elif s == "paper1500":
             # The rotation gauges during the frictionless settling: without them that
             # level of this scene does not converge (docs/level-solver-measurements.md).
@@ -90,7 +96,7 @@ def scene_runs(a):
                     "-constrain_rotation", "true"]
             runs.append((s, "n1500_k0.5_mu0.2", a.ranks, opts + (["-pressures", p] if p else [])))
         else:
-            sys.exit(f"unknown scene {s}: use default, campaign50, frictionless, frictional, large400 or paper1500")
+            sys.exit(f"unknown scene {s}: use default, campaign50, frictionless, frictional, large400, paper200 or paper1500")
     return runs
 
 
