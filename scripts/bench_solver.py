@@ -59,6 +59,9 @@ def scene_runs(a):
     """(scene, label, ranks, options) of every run, without -level_solver."""
     runs = []
     p = a.pressures
+    # The paper's scene (petsc-options/paper.opts, kappa 0.5, friction 0.2) and its pressures.
+    paper = ["-options_file", os.path.join(ROOT, "petsc-options", "paper.opts"), "-kappa", "0.5", "-friction", "0.2"] \
+        + (["-pressures", p] if p else [])
     for s in a.scenes:
         if s == "default":
             runs.append((s, "n20_k0.5_mu0.2", 1, ["-options_file", os.path.join(ROOT, "petsc-options", "default.opts")]))
@@ -86,15 +89,11 @@ def scene_runs(a):
                 runs.append((s, f"n400_k{k:g}_mu{mu:g}", 1, ["-n_particles", "400", "-kappa", str(k), "-friction", str(mu),
                                                             "-pressures", p or CAMPAIGN_PRESSURES]))
         elif s == "paper200":
-            runs.append((s, "n200_k0.5_mu0.2", 1, ["-options_file", os.path.join(ROOT, "petsc-options", "paper.opts"),
-                                                   "-n_particles", "200", "-kappa", "0.5", "-friction", "0.2"]
-                         + (["-pressures", p] if p else [])))
+            runs.append((s, "n200_k0.5_mu0.2", 1, paper + ["-n_particles", "200"]))
         elif s == "paper1500":
             # The rotation gauges during the frictionless settling: without them that
             # level of this scene does not converge (docs/level-solver-measurements.md).
-            opts = ["-options_file", os.path.join(ROOT, "petsc-options", "paper.opts"), "-kappa", "0.5", "-friction", "0.2",
-                    "-constrain_rotation", "true"]
-            runs.append((s, "n1500_k0.5_mu0.2", a.ranks, opts + (["-pressures", p] if p else [])))
+            runs.append((s, "n1500_k0.5_mu0.2", a.ranks, paper + ["-constrain_rotation", "true"]))
         else:
             sys.exit(f"unknown scene {s}: use default, campaign50, frictionless, frictional, large400, paper200 or paper1500")
     return runs
