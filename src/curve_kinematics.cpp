@@ -17,13 +17,16 @@
 // the envelope theorem, the slip's with dt*/dq from the implicit function
 // theorem); the residual needs nothing more, and most candidates carry no
 // force. The second derivatives (the Newton matrix of a loaded contact) come
-// from forward-mode automatic differentiation (value, gradient, Hessian),
-// with t*(q) differentiated through the implicit function theorem in the
-// Newton form: t*(q) is found in double precision, then two Newton steps
-// t <- t - f / f_t are taken in AD arithmetic starting from the constant t*.
-// Each step doubles the order of the derivatives that are exact (the value
-// is already converged): one step gives exact first derivatives, two give
-// exact second derivatives.
+// from the implicit function theorem with t as one more variable: the gap
+// phi(q, t), the slip sigma(q, t) and the stationarity condition f(q, t) are
+// closed-form in (q, t), and x(t) = sum_i N_i(t) P_i is linear in the nodes
+// and a cubic in t, so their values, gradients and Hessians in (q, t) are
+// written down directly for x, x' and u and carried through the few
+// remaining products by forward-mode automatic differentiation. Then
+//   t*_q  = -f_q / f_t,
+//   t*_qq = -(f_qq + f_qt t*_q^T + t*_q f_tq + f_tt t*_q t*_q^T) / f_t,
+//   psi*_qq = psi_qq + psi_qt t*_q^T + t*_q psi_tq + psi_tt t*_q t*_q^T + psi_t t*_qq
+// for psi = phi, sigma (psi* = psi(q, t*(q))).
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -35,88 +38,60 @@ namespace deformix {
 namespace {
 
 constexpr int kN = 12;                   // unknowns of the pair
-constexpr int kH = kN * (kN + 1) / 2;    // packed symmetric Hessian
+// Gap and slip on segment k depend on its four nodes and the slave node (q
+// variables 0..9 below) and on t (variable 10).
+constexpr int kV = 11, kT = 10;
+constexpr int kH = kV * (kV + 1) / 2;    // packed symmetric Hessian
 
-inline int packed(int i, int j) { return i <= j ? i * kN - i * (i - 1) / 2 + (j - i) : packed(j, i); }
+inline int packed(int i, int j) { return i <= j ? i * kV - i * (i - 1) / 2 + (j - i) : packed(j, i); }
 
-// Second-order forward-mode number: value, gradient and (if Hess) the
-// packed symmetric Hessian with respect to the kN unknowns.
-template <bool Hess>
+// Second-order forward-mode number: value, gradient and packed symmetric
+// Hessian with respect to the kV variables.
 struct Ad {
   double v = 0.0;
-  double g[kN] = {};
-  double h[Hess ? kH : 1] = {};
+  double g[kV] = {};
+  double h[kH] = {};
   Ad() = default;
   explicit Ad(double value) : v(value) {}
-  static Ad variable(double value, int i) {
-    Ad a(value);
-    a.g[i] = 1.0;
-    return a;
-  }
 };
 
-template <bool H>
-Ad<H> operator+(const Ad<H> &a, const Ad<H> &b) {
-  Ad<H> r(a.v + b.v);
-  for (int i = 0; i < kN; ++i) r.g[i] = a.g[i] + b.g[i];
-  if constexpr (H)
-    for (int i = 0; i < kH; ++i) r.h[i] = a.h[i] + b.h[i];
+Ad operator-(const Ad &a, const Ad &b) {
+  Ad r(a.v - b.v);
+  for (int i = 0; i < kV; ++i) r.g[i] = a.g[i] - b.g[i];
+  for (int i = 0; i < kH; ++i) r.h[i] = a.h[i] - b.h[i];
   return r;
 }
 
-template <bool H>
-Ad<H> operator-(const Ad<H> &a, const Ad<H> &b) {
-  Ad<H> r(a.v - b.v);
-  for (int i = 0; i < kN; ++i) r.g[i] = a.g[i] - b.g[i];
-  if constexpr (H)
-    for (int i = 0; i < kH; ++i) r.h[i] = a.h[i] - b.h[i];
+Ad operator+(const Ad &a, const Ad &b) {
+  Ad r(a.v + b.v);
+  for (int i = 0; i < kV; ++i) r.g[i] = a.g[i] + b.g[i];
+  for (int i = 0; i < kH; ++i) r.h[i] = a.h[i] + b.h[i];
   return r;
 }
 
-template <bool H>
-Ad<H> operator*(double s, const Ad<H> &a) {
-  Ad<H> r(s * a.v);
-  for (int i = 0; i < kN; ++i) r.g[i] = s * a.g[i];
-  if constexpr (H)
-    for (int i = 0; i < kH; ++i) r.h[i] = s * a.h[i];
-  return r;
-}
-
-template <bool H>
-Ad<H> operator*(const Ad<H> &a, const Ad<H> &b) {
-  Ad<H> r(a.v * b.v);
-  for (int i = 0; i < kN; ++i) r.g[i] = a.v * b.g[i] + b.v * a.g[i];
-  if constexpr (H) {
-    int k = 0;
-    for (int i = 0; i < kN; ++i)
-      for (int j = i; j < kN; ++j, ++k) r.h[k] = a.v * b.h[k] + b.v * a.h[k] + a.g[i] * b.g[j] + a.g[j] * b.g[i];
-  }
+Ad operator*(const Ad &a, const Ad &b) {
+  Ad r(a.v * b.v);
+  for (int i = 0; i < kV; ++i) r.g[i] = a.v * b.g[i] + b.v * a.g[i];
+  int k = 0;
+  for (int i = 0; i < kV; ++i)
+    for (int j = i; j < kV; ++j, ++k) r.h[k] = a.v * b.h[k] + b.v * a.h[k] + a.g[i] * b.g[j] + a.g[j] * b.g[i];
   return r;
 }
 
 // f(a) for a scalar function with derivatives f1 = f'(a.v), f2 = f''(a.v).
-template <bool H>
-Ad<H> chain(const Ad<H> &a, double f, double f1, double f2) {
-  Ad<H> r(f);
-  for (int i = 0; i < kN; ++i) r.g[i] = f1 * a.g[i];
-  if constexpr (H) {
-    int k = 0;
-    for (int i = 0; i < kN; ++i)
-      for (int j = i; j < kN; ++j, ++k) r.h[k] = f1 * a.h[k] + f2 * a.g[i] * a.g[j];
-  }
+Ad chain(const Ad &a, double f, double f1, double f2) {
+  Ad r(f);
+  for (int i = 0; i < kV; ++i) r.g[i] = f1 * a.g[i];
+  int k = 0;
+  for (int i = 0; i < kV; ++i)
+    for (int j = i; j < kV; ++j, ++k) r.h[k] = f1 * a.h[k] + f2 * a.g[i] * a.g[j];
   return r;
 }
 
-template <bool H>
-Ad<H> inv(const Ad<H> &a) {
-  const double r = 1.0 / a.v;
-  return chain(a, r, -r * r, 2.0 * r * r * r);
-}
-
-template <bool H>
-Ad<H> sqrt(const Ad<H> &a) {
-  const double s = std::sqrt(a.v);
-  return chain(a, s, 0.5 / s, -0.25 / (s * a.v));
+// 1 / sqrt(a).
+Ad inv_sqrt(const Ad &a) {
+  const double s = 1.0 / std::sqrt(a.v);
+  return chain(a, s, -0.5 * s / a.v, 0.75 * s / (a.v * a.v));
 }
 
 // Catmull-Rom basis and its first two derivatives at t (any scalar type).
@@ -187,49 +162,60 @@ bool project(const Real P[5][2], int k, const double p[2], double *t_out, double
   return true;
 }
 
-// Gap, slip and their derivatives on segment k around the converged t.
-template <bool H>
-void evaluate(const double q[12], const double q0[12], int k, double t_star, PairKinematics *out) {
-  using T = Ad<H>;
-  T P[5][2], p[2];
-  for (int j = 0; j < 5; ++j)
-    for (int c = 0; c < 2; ++c) P[j][c] = T::variable(q[2 * j + c], 2 * j + c);
-  for (int c = 0; c < 2; ++c) p[c] = T::variable(q[10 + c], 10 + c);
-  // t*(q): two Newton steps in AD from the converged value.
-  T t(t_star);
-  T x[2], a[2], b[2];
-  for (int step = 0; step < (H ? 2 : 1); ++step) {
-    curve_point(P, k, t, x, a, b);
-    const T r0 = p[0] - x[0], r1 = p[1] - x[1];
-    const T f = r0 * a[0] + r1 * a[1];
-    const T df = r0 * b[0] + r1 * b[1] - (a[0] * a[0] + a[1] * a[1]);
-    t = t - f * inv(df);
-  }
-  curve_point(P, k, t, x, a, b);
-  const T inv_len = inv(sqrt(a[0] * a[0] + a[1] * a[1]));
-  // n = (a_y, -a_x) / |a|,  tau = a / |a|.
-  const T gap = ((p[0] - x[0]) * a[1] - (p[1] - x[1]) * a[0]) * inv_len;
-  T N[4], dN[4], d2N[4];
-  basis(t, N, dN, d2N);
-  T u[2];
+// Gap, slip and their first and second derivatives on segment k at the
+// converged t (see the top of the file).
+void second_derivatives(const double q[12], const double q0[12], int k, double t, PairKinematics *out) {
+  Real Nr[4], dNr[4], d2Nr[4];
+  basis(Real(t), Nr, dNr, d2Nr);
+  const double d3N[4] = {-3.0, 9.0, -9.0, 3.0};
+  // x, x' = a and u = (p - p0) - sum_i N_i (P_i - P0_i) in (q, t): linear in
+  // the nodes, so their only second derivatives are d/dt d/dP_i and d2/dt2.
+  Ad x[2], a[2], u[2], p[2];
   for (int c = 0; c < 2; ++c) {
-    u[c] = p[c] - T(q0[10 + c]);
-    for (int i = 0; i < 4; ++i) u[c] = u[c] - N[i] * (P[k + i][c] - T(q0[2 * (k + i) + c]));
+    for (int i = 0; i < 4; ++i) {
+      const double P = q[2 * (k + i) + c], dP = P - q0[2 * (k + i) + c];
+      const double N = Nr[i].v, dN = dNr[i].v, d2N = d2Nr[i].v;
+      const int v = 2 * i + c;  // variable of node k + i, coordinate c
+      x[c].v += N * P, x[c].g[v] = N, x[c].g[kT] += dN * P, x[c].h[packed(kT, kT)] += d2N * P;
+      a[c].v += dN * P, a[c].g[v] = dN, a[c].g[kT] += d2N * P, a[c].h[packed(kT, kT)] += d3N[i] * P;
+      u[c].v -= N * dP, u[c].g[v] = -N, u[c].g[kT] -= dN * dP, u[c].h[packed(kT, kT)] -= d2N * dP;
+      x[c].h[packed(v, kT)] = dN, a[c].h[packed(v, kT)] = d2N, u[c].h[packed(v, kT)] = -dN;
+    }
+    p[c] = Ad(q[10 + c]), p[c].g[8 + c] = 1.0;
+    u[c].v += q[10 + c] - q0[10 + c], u[c].g[8 + c] = 1.0;
   }
-  const T slip = (u[0] * a[0] + u[1] * a[1]) * inv_len;
-
+  const Ad r0 = p[0] - x[0], r1 = p[1] - x[1];
+  const Ad f = r0 * a[0] + r1 * a[1];
+  const Ad inv_len = inv_sqrt(a[0] * a[0] + a[1] * a[1]);
+  // n = (a_y, -a_x) / |a|,  tau = a / |a|.
+  const Ad gap = (r0 * a[1] - r1 * a[0]) * inv_len;
+  const Ad slip = (u[0] * a[0] + u[1] * a[1]) * inv_len;
+  // t*(q) by the implicit function theorem.
+  constexpr int nq = kV - 1;
+  const double f_t = f.g[kT];
+  double tq[nq], tqq[nq][nq];
+  for (int v = 0; v < nq; ++v) tq[v] = -f.g[v] / f_t;
+  const auto second = [&](const Ad &psi, int v, int w) {  // d2/dq_v dq_w of psi(q, t) along t*(q), without psi_t t*_qq
+    return psi.h[packed(v, w)] + psi.h[packed(v, kT)] * tq[w] + tq[v] * psi.h[packed(w, kT)] +
+           psi.h[packed(kT, kT)] * tq[v] * tq[w];
+  };
+  for (int v = 0; v < nq; ++v)
+    for (int w = v; w < nq; ++w) tqq[v][w] = tqq[w][v] = -second(f, v, w) / f_t;
+  const auto unknown = [k](int v) { return v < 8 ? 2 * k + v : 2 + v; };  // pair unknown of variable v
   out->ndof = kN;
   out->gap = gap.v;
   out->slip = slip.v;
   out->normal[0] = a[1].v * inv_len.v;
   out->normal[1] = -a[0].v * inv_len.v;
-  for (int i = 0; i < kN; ++i) out->dgap[i] = gap.g[i], out->dslip[i] = slip.g[i];
-  if constexpr (H)
-    for (int i = 0; i < kN; ++i)
-      for (int j = 0; j < kN; ++j) {
-        out->d2gap[i * kN + j] = gap.h[packed(i, j)];
-        out->d2slip[i * kN + j] = slip.h[packed(i, j)];
-      }
+  for (int v = 0; v < nq; ++v) {
+    out->dgap[unknown(v)] = gap.g[v] + gap.g[kT] * tq[v];
+    out->dslip[unknown(v)] = slip.g[v] + slip.g[kT] * tq[v];
+    for (int w = v; w < nq; ++w) {
+      const double hg = second(gap, v, w) + gap.g[kT] * tqq[v][w], hs = second(slip, v, w) + slip.g[kT] * tqq[v][w];
+      out->d2gap[unknown(v) * kN + unknown(w)] = out->d2gap[unknown(w) * kN + unknown(v)] = hg;
+      out->d2slip[unknown(v) * kN + unknown(w)] = out->d2slip[unknown(w) * kN + unknown(v)] = hs;
+    }
+  }
 }
 
 // Gap, slip and their first derivatives on segment k at the converged t, in
@@ -329,7 +315,7 @@ PairKinematics curve_node(const double q[12], const double q0[12], bool hessians
     }
   }
   if (hessians)
-    evaluate<true>(q, q0, seg, t[seg], &k);
+    second_derivatives(q, q0, seg, t[seg], &k);
   else
     first_derivatives(q, q0, seg, t[seg], &k);
   return k;

@@ -92,8 +92,8 @@ PairKinematics segment_node(const double q[6], const double q0[6]);
 // polyline master Newton cycles there between the two segments, whose
 // normals differ by the corner angle).
 // On equally spaced collinear master nodes the curve is the straight line.
-// Second derivatives (d2gap, d2slip) only if `hessians` (exact, by forward
-// automatic differentiation; they cost about 20 times the rest).
+// Second derivatives (d2gap, d2slip) only if `hessians` (exact: the
+// implicit function theorem over the closed-form gap and slip in (q, t)).
 // *beyond = -1 / +1 when the closest point lies before m1 / after m3 (the
 // curve is then the extrapolated end segment: re-centre the patch).
 // Degenerate input (collapsed tangent, or no closest point: a node far on
