@@ -152,8 +152,13 @@ bool project(const Real P[5][2], int k, const double p[2], double *t_out, double
     const double df = -(a[0].v * a[0].v + a[1].v * a[1].v) + rx * b[0].v + ry * b[1].v;
     if (!(df < 0.0)) return false;  // not a minimum of the distance: the node is far on the concave side
     const double dt = -f / df;
-    t = std::clamp(t + dt, -1.0, 2.0);
-    if (std::fabs(dt) < 1e-15) break;
+    const double next = std::clamp(t + dt, -1.0, 2.0);
+    if (next == t) break;  // held at a bound of the extrapolated range
+    t = next;
+    // Newton converges quadratically: after a step below 1e-9 t is exact to
+    // round-off, which the absolute coordinates (tens of <d>) put near 1e-14;
+    // a test at the last bit would go on iterating on that noise.
+    if (std::fabs(dt) < 1e-9) break;
   }
   Real x[2], a[2], b[2];
   curve_point(P, k, Real(t), x, a, b);
