@@ -94,40 +94,27 @@ Ad inv_sqrt(const Ad &a) {
   return chain(a, s, -0.5 * s / a.v, 0.75 * s / (a.v * a.v));
 }
 
-// Catmull-Rom basis and its first two derivatives at t (any scalar type).
-template <class T>
-void basis(const T &t, T N[4], T dN[4], T d2N[4]) {
-  const T one(1.0);
-  const T t2 = t * t, t3 = t2 * t;
+// Catmull-Rom basis and its first two derivatives at t.
+void basis(double t, double N[4], double dN[4], double d2N[4]) {
+  const double t2 = t * t, t3 = t2 * t;
   N[0] = (-0.5) * t + t2 - 0.5 * t3;
-  N[1] = one - 2.5 * t2 + 1.5 * t3;
+  N[1] = 1.0 - 2.5 * t2 + 1.5 * t3;
   N[2] = 0.5 * t + 2.0 * t2 - 1.5 * t3;
   N[3] = (-0.5) * t2 + 0.5 * t3;
-  dN[0] = T(-0.5) + 2.0 * t - 1.5 * t2;
+  dN[0] = -0.5 + 2.0 * t - 1.5 * t2;
   dN[1] = (-5.0) * t + 4.5 * t2;
-  dN[2] = T(0.5) + 4.0 * t - 4.5 * t2;
+  dN[2] = 0.5 + 4.0 * t - 4.5 * t2;
   dN[3] = (-1.0) * t + 1.5 * t2;
-  d2N[0] = T(2.0) - 3.0 * t;
-  d2N[1] = T(-5.0) + 9.0 * t;
-  d2N[2] = T(4.0) - 9.0 * t;
-  d2N[3] = T(-1.0) + 3.0 * t;
+  d2N[0] = 2.0 - 3.0 * t;
+  d2N[1] = -5.0 + 9.0 * t;
+  d2N[2] = 4.0 - 9.0 * t;
+  d2N[3] = -1.0 + 3.0 * t;
 }
-
-// Plain doubles with the same interface as Ad (for the projection).
-struct Real {
-  double v;
-  Real(double x = 0.0) : v(x) {}
-};
-inline Real operator+(Real a, Real b) { return a.v + b.v; }
-inline Real operator-(Real a, Real b) { return a.v - b.v; }
-inline Real operator*(Real a, Real b) { return a.v * b.v; }
-inline Real operator*(double s, Real a) { return s * a.v; }
 
 // Point, tangent and second derivative of segment k (nodes k .. k+3 of the
 // five patch nodes P) at t.
-template <class T>
-void curve_point(const T P[5][2], int k, const T &t, T x[2], T a[2], T b[2]) {
-  T N[4], dN[4], d2N[4];
+void curve_point(const double P[5][2], int k, double t, double x[2], double a[2], double b[2]) {
+  double N[4], dN[4], d2N[4];
   basis(t, N, dN, d2N);
   for (int c = 0; c < 2; ++c) {
     x[c] = N[0] * P[k][c] + N[1] * P[k + 1][c] + N[2] * P[k + 2][c] + N[3] * P[k + 3][c];
@@ -139,39 +126,40 @@ void curve_point(const T P[5][2], int k, const T &t, T x[2], T a[2], T b[2]) {
 // Stationary point of |p - x(t)|^2 on segment k by Newton from the chord
 // projection; t may leave [0, 1] (extrapolated cubic). Returns false if the
 // iteration does not settle (the caller then takes the other segment).
-bool project(const Real P[5][2], int k, const double p[2], double *t_out, double *dist) {
-  const double ex = P[k + 2][0].v - P[k + 1][0].v, ey = P[k + 2][1].v - P[k + 1][1].v;
+bool project(const double P[5][2], int k, const double p[2], double *t_out, double *dist) {
+  const double ex = P[k + 2][0] - P[k + 1][0], ey = P[k + 2][1] - P[k + 1][1];
   const double l2 = ex * ex + ey * ey;
   if (!(l2 > 0.0)) return false;
-  double t = std::clamp(((p[0] - P[k + 1][0].v) * ex + (p[1] - P[k + 1][1].v) * ey) / l2, -0.5, 1.5);
+  double t = std::clamp(((p[0] - P[k + 1][0]) * ex + (p[1] - P[k + 1][1]) * ey) / l2, -0.5, 1.5);
   for (int it = 0; it < 30; ++it) {
-    Real x[2], a[2], b[2];
-    curve_point(P, k, Real(t), x, a, b);
-    const double rx = p[0] - x[0].v, ry = p[1] - x[1].v;
-    const double f = rx * a[0].v + ry * a[1].v;
-    const double df = -(a[0].v * a[0].v + a[1].v * a[1].v) + rx * b[0].v + ry * b[1].v;
+    double x[2], a[2], b[2];
+    curve_point(P, k, t, x, a, b);
+    const double rx = p[0] - x[0], ry = p[1] - x[1];
+    const double f = rx * a[0] + ry * a[1];
+    const double df = -(a[0] * a[0] + a[1] * a[1]) + rx * b[0] + ry * b[1];
     if (!(df < 0.0)) return false;  // not a minimum of the distance: the node is far on the concave side
     const double dt = -f / df;
     const double next = std::clamp(t + dt, -1.0, 2.0);
     if (next == t) break;  // held at a bound of the extrapolated range
     t = next;
     // Newton converges quadratically: after a step below 1e-9 t is exact to
-    // round-off, which the absolute coordinates (tens of <d>) put near 1e-14;
+    // round-off, which the absolute coordinates (up to tens of <d>) put near 1e-14;
     // a test at the last bit would go on iterating on that noise.
     if (std::fabs(dt) < 1e-9) break;
   }
-  Real x[2], a[2], b[2];
-  curve_point(P, k, Real(t), x, a, b);
+  double x[2], a[2], b[2];
+  curve_point(P, k, t, x, a, b);
   *t_out = t;
-  *dist = std::hypot(p[0] - x[0].v, p[1] - x[1].v);
+  *dist = std::hypot(p[0] - x[0], p[1] - x[1]);
   return true;
 }
 
 // Gap, slip and their first and second derivatives on segment k at the
-// converged t (see the top of the file).
+// converged t (see the top of the file); the entries of the patch node off
+// the segment are left as they are (zero in a new PairKinematics).
 void second_derivatives(const double q[12], const double q0[12], int k, double t, PairKinematics *out) {
-  Real Nr[4], dNr[4], d2Nr[4];
-  basis(Real(t), Nr, dNr, d2Nr);
+  double Nb[4], dNb[4], d2Nb[4];
+  basis(t, Nb, dNb, d2Nb);
   const double d3N[4] = {-3.0, 9.0, -9.0, 3.0};
   // x, x' = a and u = (p - p0) - sum_i N_i (P_i - P0_i) in (q, t): linear in
   // the nodes, so their only second derivatives are d/dt d/dP_i and d2/dt2.
@@ -179,7 +167,7 @@ void second_derivatives(const double q[12], const double q0[12], int k, double t
   for (int c = 0; c < 2; ++c) {
     for (int i = 0; i < 4; ++i) {
       const double P = q[2 * (k + i) + c], dP = P - q0[2 * (k + i) + c];
-      const double N = Nr[i].v, dN = dNr[i].v, d2N = d2Nr[i].v;
+      const double N = Nb[i], dN = dNb[i], d2N = d2Nb[i];
       const int v = 2 * i + c;  // variable of node k + i, coordinate c
       x[c].v += N * P, x[c].g[v] = N, x[c].g[kT] += dN * P, x[c].h[packed(kT, kT)] += d2N * P;
       a[c].v += dN * P, a[c].g[v] = dN, a[c].g[kT] += d2N * P, a[c].h[packed(kT, kT)] += d3N[i] * P;
@@ -233,11 +221,7 @@ void second_derivatives(const double q[12], const double q0[12], int k, double t
 //        du = dp - sum_i N_i dP_i - [sum_i N_i' (P_i - P0_i)] dt.
 void first_derivatives(const double q[12], const double q0[12], int k, double t, PairKinematics *out) {
   double N[4], dN[4], d2N[4];
-  {
-    Real Nr[4], dNr[4], d2Nr[4];
-    basis(Real(t), Nr, dNr, d2Nr);
-    for (int i = 0; i < 4; ++i) N[i] = Nr[i].v, dN[i] = dNr[i].v, d2N[i] = d2Nr[i].v;
-  }
+  basis(t, N, dN, d2N);
   double x[2] = {0, 0}, a[2] = {0, 0}, b[2] = {0, 0}, u[2], w[2] = {0, 0};
   for (int c = 0; c < 2; ++c) {
     u[c] = q[10 + c] - q0[10 + c];
@@ -280,7 +264,7 @@ PairKinematics curve_node(const double q[12], const double q0[12], bool hessians
   if (beyond) *beyond = 0;
   PairKinematics k;
   k.ndof = kN;
-  Real P[5][2];
+  double P[5][2];
   for (int j = 0; j < 5; ++j)
     for (int c = 0; c < 2; ++c) P[j][c] = q[2 * j + c];
   const double p[2] = {q[10], q[11]};
@@ -311,11 +295,11 @@ PairKinematics curve_node(const double q[12], const double q0[12], bool hessians
   }
   // Degenerate tangent (collapsed segments): no normal.
   {
-    Real x[2], a[2], b[2];
-    curve_point(P, seg, Real(t[seg]), x, a, b);
+    double x[2], a[2], b[2];
+    curve_point(P, seg, t[seg], x, a, b);
     const double scale = std::hypot(q[6] - q[2], q[7] - q[3]);
-    if (!(std::hypot(a[0].v, a[1].v) > 1e-12 * scale)) {
-      k.gap = std::hypot(p[0] - x[0].v, p[1] - x[1].v);
+    if (!(std::hypot(a[0], a[1]) > 1e-12 * scale)) {
+      k.gap = std::hypot(p[0] - x[0], p[1] - x[1]);
       return k;
     }
   }
