@@ -521,8 +521,9 @@ TEST(CurveNode, HessiansSymmetricAndOptional) {
         EXPECT_LE(std::fabs(k.d2gap[i * 12 + j] - k.d2gap[j * 12 + i]), 1e-13 * sg);
         EXPECT_LE(std::fabs(k.d2slip[i * 12 + j] - k.d2slip[j * 12 + i]), 1e-13 * ss);
       }
-    // Without Hessians: the same values and gradients (to round-off: one AD
-    // Newton step instead of two), zero second derivatives.
+    // Without Hessians: the same values and gradients (to round-off: the
+    // closed-form first derivatives against those of the Hessian pass),
+    // zero second derivatives.
     EXPECT_NEAR(k1.gap, k.gap, 1e-15);
     EXPECT_NEAR(k1.slip, k.slip, 1e-15);
     for (int i = 0; i < 12; ++i) {
@@ -531,6 +532,34 @@ TEST(CurveNode, HessiansSymmetricAndOptional) {
     }
     EXPECT_EQ(max_abs(k1.d2gap, 144), 0.0);
     EXPECT_EQ(max_abs(k1.d2slip, 144), 0.0);
+  }
+}
+
+TEST(CurveNode, TranslatedFarFromTheOrigin) {
+  // In a packing the coordinates are tens of <d> while the gaps are 1e-3
+  // <d> and less: the closest point is then known to about 1e-14 in t only,
+  // and the projection must still settle there. The pair translated by
+  // (35, -27) gives the same kinematics to round-off of those coordinates.
+  std::mt19937 rng(103);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  for (int trial = 0; trial < 40; ++trial) {
+    const Config c = curve_config(0.95 * U(rng), 0.01 * U(rng), rng);
+    double q[12], q0[12];
+    for (int i = 0; i < 12; ++i) q[i] = c.q[i] + (i % 2 ? -27.0 : 35.0), q0[i] = c.q0[i] + (i % 2 ? -27.0 : 35.0);
+    for (bool hessians : {false, true}) {
+      const PairKinematics k = curve_node(c.q, c.q0, hessians), kt = curve_node(q, q0, hessians);
+      EXPECT_NEAR(kt.gap, k.gap, 1e-12);
+      EXPECT_NEAR(kt.slip, k.slip, 1e-12);
+      for (int i = 0; i < 12; ++i) {
+        EXPECT_NEAR(kt.dgap[i], k.dgap[i], 1e-10);
+        EXPECT_NEAR(kt.dslip[i], k.dslip[i], 1e-10);
+      }
+      const double sg = max_abs(k.d2gap, 144), ss = max_abs(k.d2slip, 144);
+      for (int i = 0; i < 144; ++i) {
+        EXPECT_NEAR(kt.d2gap[i], k.d2gap[i], 1e-7 * sg);
+        EXPECT_NEAR(kt.d2slip[i], k.d2slip[i], 1e-7 * ss);
+      }
+    }
   }
 }
 
