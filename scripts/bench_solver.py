@@ -115,15 +115,18 @@ def run_one(a, scene, label, ranks, opts, strategy):
         mpi += [x for kv in a.baseline_env for x in ("-x", kv.split("=", 1)[0])]
     cmd = mpi + \
           [exe] + opts + solver + ["-output_dir", out, "-checkpoint", "false"] + a.extra.split()
+    # The run's output goes to log.txt as it comes (a long run's progress
+    # lines can be followed there), after the command line.
     t0 = time.time()
-    try:
-        p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=a.timeout, env=env)
-        status, log = ("ok" if p.returncode == 0 else "failed"), p.stdout
-    except subprocess.TimeoutExpired as e:
-        status, log = "timeout", (e.stdout.decode() if isinstance(e.stdout, bytes) else (e.stdout or ""))
-    wall = time.time() - t0
     with open(os.path.join(out, "log.txt"), "w") as f:
-        f.write(" ".join((["env"] + a.baseline_env if env else []) + cmd) + "\n" + log)
+        f.write(" ".join((["env"] + a.baseline_env if env else []) + cmd) + "\n")
+        f.flush()
+        try:
+            p = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, timeout=a.timeout, env=env)
+            status = "ok" if p.returncode == 0 else "failed"
+        except subprocess.TimeoutExpired:
+            status = "timeout"
+    wall = time.time() - t0
     rows = []
     curve = os.path.join(out, "curve.csv")
     if os.path.exists(curve):
