@@ -156,7 +156,14 @@ const std::vector<std::string> kCurveColumns = {
 // where hybrid settles in 213 iterations (11 s on 2 ranks), and the
 // frictionless settling of the mixture at P/E 1e-5 failed at every cut
 // down to 3e-7 P (halving the pressure does not make the geometry easier).
-// Other strategies step as usual.
+// A settling step is not halved, so its newton gets kSettleBudget times
+// -level_max_its linearizations before hybrid takes over: on the 1500-disk
+// paper scene (-constrain_rotation true, 2 ranks) the frictionless settling
+// converges after about 450, while with 400 hybrid started again from the
+// settled rigid packing and crept for over an hour without passing the
+// level criterion (docs/level-solver-measurements.md, "Measured: the
+// 1500-disk paper scene"). Other strategies step as usual.
+constexpr PetscInt kSettleBudget = 5;
 PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &load, double pressure, double *step,
                       LevelReport *rep) {
   PetscFunctionBeginUser;
@@ -166,6 +173,7 @@ PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &l
   }
   LoadControlParameters once = load;
   once.max_cuts = 0;
+  once.level.max_its = kSettleBudget * load.level.max_its;
   const double step_before = *step;
   PetscCall(PetscPushErrorHandler(PetscReturnErrorHandler, nullptr));
   const PetscErrorCode ierr = AdvanceToPressure(problem, once, pressure, step, rep);

@@ -33,7 +33,7 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                               "", merits, 2, merits[merit_choice], &merit_choice, nullptr));
   PetscCall(PetscOptionsInt("-level_attempt_its", "hybrid: linearizations of the newton attempt before anchored takes over", "",
                             attempt_its, &attempt_its, nullptr));
-  PetscCall(PetscOptionsInt("-level_max_its", "newton (and auto's frictionless levels): linearizations per load step before the step is halved", "", max_its,
+  PetscCall(PetscOptionsInt("-level_max_its", "newton (and auto's frictionless levels): linearizations per load step before the step is halved (compact's settling steps, which are not halved: 5 times as many before hybrid takes over)", "", max_its,
                             &max_its, nullptr));
   PetscCall(PetscOptionsReal("-level_initial_move",
                              "newton: trust radius at the start of a load step (largest move of a body under the "
