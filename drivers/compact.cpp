@@ -228,7 +228,6 @@ PetscErrorCode Run(MPI_Comm comm) {
   // The paper's level criterion (unbalanced forces below 1e-4 P <d>, phi
   // settled to 1e-4) besides exact equilibrium: see -level_force_rtol.
   params.level_force_rtol = 1e-4;
-  params.newton_max_move = 0.05;
   // c_n = c_t = 0.01 E in the NCP functions (the Newton path only, not the
   // solution). In a packing at P << E the relevant stiffnesses (sliding,
   // rolling, rearranging) are far below E, and with c = E the stick/slip
@@ -241,15 +240,8 @@ PetscErrorCode Run(MPI_Comm comm) {
   // Deformable pairs: the mortar (cell-averaged) gap, so that no point of the
   // slave boundary is left unchecked (node-to-segment one way lets the
   // master's nodes in by 2-4e-2 <d> at P/E = 0.5, phi 1.003 at kappa 1).
-  // With it, a failed inner solve keeps the min NCP function: switching to
-  // Fischer-Burmeister made the frictionless kappa = 1 step P/E 0.05 -> 0.1
-  // (50 disks) cycle at frozen geometry (15 Newton iterations without
-  // convergence even at rho_a = 1e5 E) and fail after 7580 iterations; with
-  // min it takes 1340 (nts: 2893). 50-disk campaign: docs/validation.md.
   params.deformable_contact = DeformableContact::Mortar;
-  params.ptc_retry_fb = PETSC_FALSE;
-  // Full Newton steps inside each pseudo-time step (their length is limited
-  // by -newton_max_move and the contact step fraction instead);
+  // Full Newton steps inside each pseudo-time step (anchored);
   // -snes_linesearch_type overrides it.
   load.level.line_search = SNESLINESEARCHBASIC;
   PetscCall(ProcessOptions(comm, &opts));

@@ -152,7 +152,7 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
     ContactGeometry(candidates_[c], z, &lc, values && (lam_n != 0.0 || lam_t != 0.0));
     const PairKinematics &k = lc.k;
     const int nd = k.ndof;
-    NormalNcp ncp = normal_ncp(ncp_now_, lam_n, k.gap, c_n, kTouchingGap * mean_diameter_ * c_n);
+    NormalNcp ncp = normal_ncp(params_.ncp, lam_n, k.gap, c_n, kTouchingGap * mean_diameter_ * c_n);
     TangentialNcp tan;
     if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t, kSlipTie * c_t * mean_diameter_);
     if (active) {

@@ -647,7 +647,7 @@ class AnchoredContinuation {
   static PetscErrorCode Converged(SNES snes, PetscInt it, PetscReal, PetscReal snorm, PetscReal fnorm,
                                   SNESConvergedReason *reason, void *ctx);
   static PetscErrorCode Monitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx);
-  static PetscErrorCode LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *ctx);
+  static PetscErrorCode DetectCycle(SNESLineSearch, Vec, Vec, PetscBool *changed, void *ctx);
   static PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *changed_Y, PetscBool *changed_W,
                                   void *ctx);
 
@@ -658,13 +658,13 @@ class AnchoredContinuation {
   Vec z_ = nullptr, F_ = nullptr;  // the problem's (layout) vectors
   Mat J_ = nullptr;
   KSP ksp_ = nullptr;
-  Vec sqrt_weight_ = nullptr, work_ = nullptr, step_ = nullptr, floor_ = nullptr;
+  Vec work_ = nullptr, step_ = nullptr;
   int layouts_ = -1;
   MPI_Comm comm_ = MPI_COMM_NULL;
   std::vector<char> checked_;               // contact states at the last convergence test
   std::vector<char> monitor_states_;        // contact states at the last monitored iterate
-  std::vector<std::uint64_t> history_;      // hashes of the contact states of the last Newton iterates (LimitStep)
-  bool backtrack_ = false;                  // LimitStep found an active-set cycle: Backtrack this step
+  std::vector<std::uint64_t> history_;      // hashes of the contact states of the last Newton iterates (DetectCycle)
+  bool backtrack_ = false;                  // DetectCycle found an active-set cycle: Backtrack this step
   double fnorm0_ = 0.0;
   bool stalled_ = false;  // the last inner solve ended at ptc_stall_its with |G| halved (Converged)
 };
@@ -672,7 +672,7 @@ class AnchoredContinuation {
 PetscErrorCode AnchoredContinuation::Destroy() {
   PetscFunctionBeginUser;
   PetscCall(SNESDestroy(&snes_));
-  PetscCall(DestroyAll({&sqrt_weight_, &work_, &step_, &floor_}));
+  PetscCall(DestroyAll({&work_, &step_}));
   PetscFunctionReturn(0);
 }
 
@@ -683,9 +683,7 @@ PetscErrorCode AnchoredContinuation::Attach() {
   layouts_ = p_.LayoutsCreated();
   PetscCall(Destroy());
   PetscCall(PetscObjectGetComm((PetscObject)z_, &comm_));
-  PetscCall(DuplicateAll(z_, {&sqrt_weight_, &work_, &step_, &floor_}));
-  PetscCall(p_.ShiftDiagonals(floor_, sqrt_weight_));
-  PetscCall(VecSqrtAbs(sqrt_weight_));
+  PetscCall(DuplicateAll(z_, {&work_, &step_}));
   const ProblemParameters &pp = p_.Parameters();
   PetscCall(SNESCreate(comm_, &snes_));
   PetscCall(SNESSetType(snes_, SNESNEWTONLS));
@@ -706,7 +704,7 @@ PetscErrorCode AnchoredContinuation::Attach() {
   PetscCall(SNESSetFromOptions(snes_));
   if (prm_.newton_monitor || prm_.newton_monitor_contacts) PetscCall(SNESMonitorSet(snes_, Monitor, this, nullptr));
   PetscCall(SNESGetLineSearch(snes_, &ls));
-  PetscCall(SNESLineSearchSetPreCheck(ls, LimitStep, this));
+  PetscCall(SNESLineSearchSetPreCheck(ls, DetectCycle, this));
   PetscCall(SNESLineSearchSetPostCheck(ls, Backtrack, this));
   PetscFunctionReturn(0);
 }
@@ -820,49 +818,30 @@ PetscErrorCode AnchoredContinuation::Monitor(SNES snes, PetscInt it, PetscReal f
   PetscFunctionReturn(0);
 }
 
-// Line-search pre-check: a Newton step that would move a body (or a wall)
-// by more than newton_max_move <d> is scaled down as a whole. Far from
-// equilibrium the linearized contact geometry is valid only over a fraction
-// of a diameter; near equilibrium steps are tiny and untouched, so the
-// quadratic rate is kept. (PETSc subtracts the step: x_new = x - y.)
-PetscErrorCode AnchoredContinuation::LimitStep(SNESLineSearch, Vec, Vec Y, PetscBool *changed, void *ctx) {
+// Line-search pre-check, which leaves the Newton step as it is (full steps
+// inside a pseudo-time step: a cap on the move of a body per step and the
+// contact step fraction, measured together, took as many iterations as
+// neither; docs/level-solver-measurements.md, "Measured: the knobs of
+// anchored"). Active-set cycles: semismooth Newton can alternate between
+// contact states (typically stick <-> slip of a contact on the edge of its
+// cone), each linearization sending the iterate into the other's region.
+// When the state at the current iterate repeats one of two or three
+// iterations ago (and is not the last one), the post-check (Backtrack)
+// shortens the step, which lands between the two regions and breaks the
+// cycle. States are compared on all ranks.
+PetscErrorCode AnchoredContinuation::DetectCycle(SNESLineSearch, Vec, Vec, PetscBool *changed, void *ctx) {
   auto *a = static_cast<AnchoredContinuation *>(ctx);
   PetscFunctionBeginUser;
   *changed = PETSC_FALSE;
-  // Active-set cycles: semismooth Newton can alternate between contact states
-  // (typically stick <-> slip of a contact on the edge of its cone), each
-  // linearization sending the iterate into the other's region. When the
-  // state at the current iterate repeats one of two or three iterations ago
-  // (and is not the last one), the step is halved, which lands between the
-  // two regions and breaks the cycle. States are compared on all ranks.
-  {
-    std::uint64_t h = 1469598103934665603ull;  // FNV-1a of the contact states
-    for (char s : a->p_.ActiveSet()) h = (h ^ static_cast<unsigned char>(s)) * 1099511628211ull;
-    std::vector<std::uint64_t> &hist = a->history_;
-    bool cycle = false;
-    for (size_t k = 2; k <= 3 && k <= hist.size(); ++k)
-      if (hist[hist.size() - k] == h && hist.back() != h) cycle = true;
-    hist.push_back(h);
-    if (hist.size() > 4) hist.erase(hist.begin());
-    a->backtrack_ = cycle;  // the post-check (Backtrack) makes this step decrease |R|
-  }
-  const double cap = a->p_.Parameters().newton_max_move * a->p_.MeanDiameter();
-  if (cap <= 0.0) PetscFunctionReturn(0);
-  {
-    double alpha;
-    PetscCall(VecScale(Y, -1.0));  // the update is -Y
-    PetscCall(a->p_.ContactStepFraction(Y, &alpha));
-    PetscCall(VecScale(Y, -alpha));
-    *changed = alpha < 1.0 ? PETSC_TRUE : PETSC_FALSE;
-  }
-  // Largest move of a body or wall unknown (rigid rotations times the radius).
-  double m;
-  PetscCall(VecPointwiseMult(a->work_, Y, a->sqrt_weight_));
-  PetscCall(VecNorm(a->work_, NORM_INFINITY, &m));
-  if (m > cap) {
-    PetscCall(VecScale(Y, cap / m));
-    *changed = PETSC_TRUE;
-  }
+  std::uint64_t h = 1469598103934665603ull;  // FNV-1a of the contact states
+  for (char s : a->p_.ActiveSet()) h = (h ^ static_cast<unsigned char>(s)) * 1099511628211ull;
+  std::vector<std::uint64_t> &hist = a->history_;
+  bool cycle = false;
+  for (size_t k = 2; k <= 3 && k <= hist.size(); ++k)
+    if (hist[hist.size() - k] == h && hist.back() != h) cycle = true;
+  hist.push_back(h);
+  if (hist.size() > 4) hist.erase(hist.begin());
+  a->backtrack_ = cycle;  // the post-check (Backtrack) makes this step decrease |R|
   PetscFunctionReturn(0);
 }
 
@@ -870,7 +849,7 @@ PetscErrorCode AnchoredContinuation::LimitStep(SNESLineSearch, Vec, Vec Y, Petsc
 // RotatedUpdate(X, -lambda Y): each deformable body's mean rotation is applied
 // as a finite rotation (a linearized rotation of a nearly incompressible disk
 // changes its area, see RotatedUpdate). After an active-set cycle was
-// detected (LimitStep), the step is backtracked, alpha = 1, 1/2, ..., 1/64,
+// detected (DetectCycle), the step is backtracked, alpha = 1, 1/2, ..., 1/64,
 // until |R| decreases (Armijo with the Newton slope -|R|^2, sigma = 1e-4); if
 // no fraction decreases it, the one with the smallest |R| is taken. Plain
 // semismooth Newton is non-monotone (a change of the active set may raise
@@ -995,15 +974,12 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
         PetscCall(PetscPrintf(comm_, "  ptc %3d  inner solve failed (%s after %" PetscInt_FMT " its, rho_a %.2e)\n", outer,
                               SNESConvergedReasons[report->reason], its, p_.AnchorWeight()));
       // Retry from the anchor with shorter pseudo-time steps, or give up.
-      // A failed inner solve is usually an active-set cycle of the min NCP
-      // function on weakly active contacts (lambda ~ 0, g ~ 0); with
-      // ptc_retry_fb the retry uses Fischer-Burmeister, which is smooth
-      // there, for the rest of the sub-step. (With the mortar law that made
-      // the contact rows cycle at frozen geometry instead: compact turns it
-      // off, docs/validation.md.)
+      // (A retry with the Fischer-Burmeister function, smooth where the min
+      // function cycles on weakly active contacts, took more iterations with
+      // both deformable contact laws: docs/level-solver-measurements.md,
+      // "Measured: the knobs of anchored".)
       if (ptc && outer < max_outer && ++failures <= 8) {
         move *= 0.25;
-        if (pp.ptc_retry_fb) p_.UseNcpFunction(NcpFunction::FischerBurmeister);
         continue;
       }
       PetscCall(p_.EndLoadStep(false, report));

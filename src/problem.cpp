@@ -80,13 +80,6 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "", level_force_rtol, &level_force_rtol, nullptr));
   PetscCall(PetscOptionsReal("-level_phi_rtol", "... and the packing fraction changed by less than this (relative) in the last pseudo-time step",
                              "", level_phi_rtol, &level_phi_rtol, nullptr));
-  PetscCall(PetscOptionsReal("-newton_max_move",
-                             "largest move of a body per Newton step / <d>; longer steps are scaled down (0: no limit)", "",
-                             newton_max_move, &newton_max_move, nullptr));
-  PetscCall(PetscOptionsBool("-ptc_retry_fb",
-                             "pseudo-transient continuation: after a failed inner solve, use the Fischer-Burmeister NCP "
-                             "function for the rest of the sub-step",
-                             "", ptc_retry_fb, &ptc_retry_fb, nullptr));
   PetscCall(PetscOptionsReal("-progress_interval",
                              "seconds between progress lines (pressure, pseudo-time step, Newton iterations, residual, "
                              "phi; in anchored also the contact rows, whether the contact states settled, and phi's change) while "
@@ -124,7 +117,6 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscCheck(level_force_rtol >= 0.0 && level_force_rtol < 1.0, comm, PETSC_ERR_USER_INPUT,
              "-level_force_rtol %g must be in [0, 1)", level_force_rtol);
   PetscCheck(level_phi_rtol > 0.0, comm, PETSC_ERR_USER_INPUT, "-level_phi_rtol %g must be positive", level_phi_rtol);
-  PetscCheck(newton_max_move >= 0.0, comm, PETSC_ERR_USER_INPUT, "-newton_max_move %g must be >= 0", newton_max_move);
   PetscCheck(contact_margin > 0.0, comm, PETSC_ERR_USER_INPUT, "-contact_margin %g must be positive", contact_margin);
   PetscFunctionReturn(0);
 }
@@ -143,7 +135,6 @@ PetscErrorCode CompactionProblem::SetParameters(const ProblemParameters &p) {
   PetscCheck(rigid_.empty() || (p.friction > 0.0) == Frictional(), comm_, PETSC_ERR_ORDER,
              "set the friction before adding rigid bodies (it decides their rotation unknowns)");
   params_ = p;
-  ncp_now_ = p.ncp;
   material_ = NeoHookean::from_young_poisson(p.young, p.poisson);
   torque_.assign(params_.constrain_rotation ? bodies_.size() : 0, 0.0);
   PetscCall(DestroySolver());
@@ -1391,7 +1382,6 @@ PetscErrorCode CompactionProblem::TangentPredictor(double dP, double overlap_lim
 PetscErrorCode CompactionProblem::BeginLoadStep(double pressure, LoadPredictor predictor, double overlap_limit) {
   PetscFunctionBeginUser;
   layouts_at_step_ = layouts_created_;
-  ncp_now_ = params_.ncp;
   step_saved_ = SaveState();
   step_saved_pressure_ = pressure_;
   const State &saved = step_saved_;
@@ -1433,7 +1423,6 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure, LoadPredictor p
 PetscErrorCode CompactionProblem::EndLoadStep(bool converged, SolveReport *report) {
   PetscFunctionBeginUser;
   rho_anchor_ = 0.0;
-  ncp_now_ = params_.ncp;
   if (!converged) {
     RestoreState(step_saved_);
     pressure_ = step_saved_pressure_;

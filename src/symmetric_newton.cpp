@@ -23,7 +23,7 @@ PetscErrorCode CompactionProblem::SymmetrizeNewtonMatrix(Mat J, bool *done) {
   *done = false;
   // Which rows can be made symmetric: every normal row an identity or a
   // min-NCP row, every tangential row an identity row (no friction acting).
-  int possible = ncp_now_ == NcpFunction::Min && jacobian_rows_.size() == 2 * candidates_.size();
+  int possible = params_.ncp == NcpFunction::Min && jacobian_rows_.size() == 2 * candidates_.size();
   for (size_t c = 0; possible && c < candidates_.size(); ++c)
     if (CandidateOwner(candidates_[c]) == rank_) possible = jacobian_rows_[2 * c + 1] != 2;
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &possible, 1, MPI_INT, MPI_MIN, comm_));

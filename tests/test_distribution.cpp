@@ -46,7 +46,6 @@ std::unique_ptr<CompactionProblem> Build(MPI_Comm comm, Pass pass = Pass::One) {
   p.friction = 0.3;
   p.constrain_rotation = PETSC_FALSE;
   p.ptc_move = 0.02;
-  p.newton_max_move = 0.05;
   p.level_force_rtol = 1e-4;
   auto problem = std::make_unique<CompactionProblem>(comm);
   if (problem->SetParameters(p)) return nullptr;

@@ -313,16 +313,14 @@ TEST(CoulombLaw, SwitchMarginsOfChangedStates) {
 // Zero penetration, multiplier signs, complementarity and the Coulomb cone
 // in a random 20-disk mixture (kappa 0.5, friction 0.2), two levels, with
 // the deformable pairs' contact law `law`.
-std::unique_ptr<CompactionProblem> TwentyDiskMixture(DeformableContact law, PetscBool retry_fb, int *n_def) {
+std::unique_ptr<CompactionProblem> TwentyDiskMixture(DeformableContact law, int *n_def) {
   DiskPacking packing = make_jammed_packing(20, 1, PackingOptions());
   assign_deformable(packing, 0.5, 1);
   ProblemParameters p;
   p.deformable_contact = law;
-  p.ptc_retry_fb = retry_fb;
   p.friction = 0.2;
   p.constrain_rotation = PETSC_TRUE;
   p.ptc_move = 0.02;
-  p.newton_max_move = 0.05;
   p.level_force_rtol = 1e-4;
   auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
   if (problem->SetParameters(p)) return nullptr;
@@ -330,11 +328,11 @@ std::unique_ptr<CompactionProblem> TwentyDiskMixture(DeformableContact law, Pets
   return problem;
 }
 
-void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
+void CheckRandomTwentyDiskMixture(DeformableContact law,
                                   LevelStrategy strategy = LevelStrategy::Anchored, bool body_criterion = true,
                                   LevelMerit merit = LevelMerit::Residual) {
   int n_def = 0;
-  auto scene = TwentyDiskMixture(law, retry_fb, &n_def);
+  auto scene = TwentyDiskMixture(law, &n_def);
   ASSERT_TRUE(scene);
   CompactionProblem &problem = *scene;
   const int n_rigid = problem.NumParticles() - n_def;
@@ -392,7 +390,7 @@ void CheckRandomTwentyDiskMixture(DeformableContact law, PetscBool retry_fb,
 }
 
 TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
-  CheckRandomTwentyDiskMixture(DeformableContact::NodeToSegment, PETSC_TRUE);
+  CheckRandomTwentyDiskMixture(DeformableContact::NodeToSegment);
 }
 
 // -level_solver auto is newton with the energy merit on the frictionless
@@ -405,7 +403,7 @@ TEST(Mixture, RandomTwentyDiskMixtureWithFriction) {
 // nodes of one deformable disk, then a larger one on a rigid disk.
 TEST(Mixture, BodyBalanceNamesTheParticleWithTheLargestNetForce) {
   int n_def = 0;
-  auto scene = TwentyDiskMixture(DeformableContact::NodeToSegment, PETSC_FALSE, &n_def);
+  auto scene = TwentyDiskMixture(DeformableContact::NodeToSegment, &n_def);
   ASSERT_TRUE(scene);
   CompactionProblem &problem = *scene;
   Vec z, F;
@@ -451,7 +449,7 @@ TEST(Mixture, AutoLevelSolverChoosesByFriction) {
   };
   const auto run = [](bool by_hand, Run *out) {
     int n_def = 0;
-    auto problem = TwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, &n_def);
+    auto problem = TwentyDiskMixture(DeformableContact::Mortar, &n_def);
     ASSERT_TRUE(problem);
     LoadControlParameters load;
     EXPECT_EQ(load.level.strategy, LevelStrategy::Auto) << "the default level solver";
@@ -484,31 +482,31 @@ TEST(Mixture, AutoLevelSolverChoosesByFriction) {
   for (int k = 0; k < 4; ++k) EXPECT_EQ(automatic.walls[k], by_hand.walls[k]) << "wall " << k;
 }
 
-// The same with compact's defaults: mortar gaps (ContactForce::gap is then
-// the slave node's weighted gap) and no Fischer-Burmeister retry.
+// The same with compact's default law: mortar gaps (ContactForce::gap is
+// then the slave node's weighted gap).
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionMortar) {
-  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE);
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar);
 }
 
 // The same with the newton level solver (one Newton step per pseudo-time
 // step), whose level criterion is per body.
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionNewton) {
-  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Newton);
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, LevelStrategy::Newton);
 }
 
 // The same with the hybrid level solver (a newton attempt, then anchored).
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionHybrid) {
-  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Hybrid);
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, LevelStrategy::Hybrid);
 }
 
 // The same with hybrid's attempt accepting steps by the energy merit too.
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionHybridEnergyMerit) {
-  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Hybrid, true, LevelMerit::Energy);
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, LevelStrategy::Hybrid, true, LevelMerit::Energy);
 }
 
 // The same with anchored's level criterion per node only (-level_body_criterion false).
 TEST(Mixture, RandomTwentyDiskMixtureWithFrictionPerNodeCriterion) {
-  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, PETSC_FALSE, LevelStrategy::Anchored, false);
+  CheckRandomTwentyDiskMixture(DeformableContact::Mortar, LevelStrategy::Anchored, false);
 }
 
 // A level that crosses a rearrangement: a rigid disk (radius 0.19) sits
@@ -734,7 +732,6 @@ std::unique_ptr<CompactionProblem> TwoPassPacking(double friction) {
   p.constrain_rotation = PETSC_TRUE;
   p.deformable_contact = DeformableContact::TwoPass;
   p.ptc_move = 0.02;
-  p.newton_max_move = 0.05;
   p.level_force_rtol = 1e-4;
   p.ncp_scale = 0.01;
   auto problem = std::make_unique<CompactionProblem>(PETSC_COMM_WORLD);
@@ -866,7 +863,6 @@ TEST(Mixture, MortarGapKeepsTheBoundariesApart) {
     p.constrain_rotation = PETSC_TRUE;
     p.deformable_contact = mortar ? DeformableContact::Mortar : DeformableContact::NodeToSegment;
     p.ptc_move = 0.02;
-    p.newton_max_move = 0.05;
     p.level_force_rtol = 1e-4;
     p.ncp_scale = 0.01;
     CompactionProblem problem(PETSC_COMM_WORLD);

@@ -79,10 +79,9 @@
 //   contact (lambda_n = c_n g = 0, or |lambda_t| = mu lambda_n without slip)
 //   may flip state forever at a converged point, where both of its states'
 //   equations hold (contact_law.hpp, changed_state_margin). Newton steps are
-//   capped at -newton_max_move <d> and shortened so that open contacts are
-//   not overshot (ContactStepFraction). A Newton step taken from contact
-//   states equal to those of two or three iterations ago (an active-set
-//   cycle, typically stick <-> slip on the edge of the cone) is backtracked
+//   full, except that a step taken from contact states equal to those of
+//   two or three iterations ago (an active-set cycle, typically stick <->
+//   slip on the edge of the cone) is backtracked
 //   until |R| decreases; an inner solve that has not halved its residual in
 //   -ptc_stall_its (6) iterations is cut short and retried with more damping,
 //   one that has halved it ends there (an inexact pseudo-time step). A

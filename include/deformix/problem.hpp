@@ -112,8 +112,6 @@ struct ProblemParameters {
   PetscInt ptc_max_steps = 1000; // pseudo-time steps per sub-step before it counts as failed
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
-  double newton_max_move = 0.0;  // Newton steps moving a body more than this x <d> are scaled down (0: no limit)
-  PetscBool ptc_retry_fb = PETSC_TRUE;       // after a failed inner solve, Fischer-Burmeister for the rest of the sub-step
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   DeformableContact deformable_contact = DeformableContact::NodeToSegment;  // law of deformable-deformable pairs
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
@@ -287,8 +285,6 @@ class CompactionProblem {
   // state; rho = 0 removes the term (EndLoadStep does).
   void SetAnchor(double rho);
   double AnchorWeight() const { return rho_anchor_; }
-  // NCP function of the normal contact rows until the load step ends.
-  void UseNcpFunction(NcpFunction f) { ncp_now_ = f; }
   // The enthalpy H = sum of the deformable disks' strain energies + P x box
   // area at the last residual evaluation (+inf where an element inverted):
   // frictionless equilibria are its constrained stationary points (the
@@ -591,7 +587,6 @@ class CompactionProblem {
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
   std::vector<PetscScalar> coo_values_;
-  NcpFunction ncp_now_ = NcpFunction::Min;  // NCP function of the current load step (UseNcpFunction)
   double merit_ = 0.0;                            // Merit(): summed over ranks by FormResidual
   double merit_local_ = 0.0;                      // this rank's part, accumulated by Assemble
   std::string options_prefix_;               // of the KSP (and the level solver's SNES)
