@@ -828,7 +828,10 @@ PetscErrorCode AnchoredContinuation::Monitor(SNES snes, PetscInt it, PetscReal f
 // When the state at the current iterate repeats one of two or three
 // iterations ago (and is not the last one), the post-check (Backtrack)
 // shortens the step, which lands between the two regions and breaks the
-// cycle. States are compared on all ranks.
+// cycle. States are compared on all ranks, as one hash of every contact's
+// state: in a large packing other contacts switch at the same time, so a
+// local cycle there goes undetected (1500 disks: docs/level-solver-
+// measurements.md, end of "Measured: the knobs of anchored").
 PetscErrorCode AnchoredContinuation::DetectCycle(SNESLineSearch, Vec, Vec, PetscBool *changed, void *ctx) {
   auto *a = static_cast<AnchoredContinuation *>(ctx);
   PetscFunctionBeginUser;
