@@ -142,6 +142,18 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
   // the indeterminate part at its current value and, like rho, never enters
   // the residual.
   const double dual_reg = params_.prox_eta;
+  // Pseudo-transient term on the contact forces (SetAnchor with forces): the
+  // kinematic rows (c_n g of a closed contact, c_t s of a sticking one) get
+  // c chi (lambda - lambda_a). The anchor on the bodies alone freezes them
+  // as rho grows while those rows still ask for an exact gap and slip: in a
+  // cluster of rigid disks with more closed contacts than motions, the
+  // kinematic error that a change of the active set leaves can then only be
+  // absorbed by the forces, which jump by about rho times it (forces of
+  // 10 E <d> from gaps of 1e-5 <d> at rho = 1e5 E). With the term the forces
+  // are held by the anchor as the bodies are; it vanishes with rho, so
+  // every accepted level is exact Coulomb and Signorini.
+  const bool anchored = rho_anchor_ > 0.0 && lambda_anchor_.size() == candidates_.size();
+  const double chi = anchored ? kMultiplierAnchor * rho_anchor_ / (params_.young * params_.young) : 0.0;
   if (values) jacobian_rows_.assign(2 * candidates_.size(), 0);
   LocalContact lc;
   for (size_t c = 0; c < candidates_.size(); ++c) {
@@ -166,7 +178,12 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
       gap_bound_[2 * c + 1] = slope;
       if (lt_dof >= 0) slip_now_[c] = k.slip;
     }
+    // The anchor term's coefficients on this contact's kinematic rows (0 on force rows).
+    const double anchor_n = chi * ncp.d_gap * (ncp.d_lambda == 0.0 ? 1.0 : 0.0);
+    const double anchor_t = lt_dof >= 0 && tan.state == kClosed ? chi * tan.d_slip : 0.0;
     if (F) {
+      if (anchor_n != 0.0) F[ln_dof] += anchor_n * (lam_n - lambda_anchor_[c]);
+      if (anchor_t != 0.0) F[lt_dof] += anchor_t * (lam_t - lambda_t_anchor_[c]);
       for (int a = 0; a < nd; ++a)
         if (lc.dofs[a] >= 0) F[lc.dofs[a]] -= lam_n * k.dgap[a] + lam_t * k.dslip[a];
       F[ln_dof] += ncp.value;
@@ -188,13 +205,13 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
       entry(lc.dofs[a], ln_dof, -k.dgap[a]);
       entry(ln_dof, lc.dofs[a], ncp.d_gap * k.dgap[a]);
     }
-    entry(ln_dof, ln_dof, ncp.d_lambda - dual_reg);
+    entry(ln_dof, ln_dof, ncp.d_lambda - dual_reg + anchor_n);
     if (lt_dof >= 0) {
       for (int a = 0; a < nd; ++a) {
         entry(lc.dofs[a], lt_dof, -k.dslip[a]);
         entry(lt_dof, lc.dofs[a], tan.d_gap * k.dgap[a] + tan.d_slip * k.dslip[a]);
       }
-      entry(lt_dof, lt_dof, tan.d_lambda_t - dual_reg);
+      entry(lt_dof, lt_dof, tan.d_lambda_t - dual_reg + anchor_t);
       entry(lt_dof, ln_dof, tan.d_lambda_n);
     }
   }

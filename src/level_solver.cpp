@@ -944,7 +944,9 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     // a body whose contacts all slid has no stiffness but rho's against
     // turning or sliding on ("Measured: friction per pseudo-time step").
     if (ptc) p_.MarkStepStart();
-    p_.SetAnchor(ptc ? std::max(rho_floor, force_residual / (move * dmean)) : 0.0);
+    // -ptc_anchor_forces: the contact forces too (SetAnchor; docs/level-solver-
+    // measurements.md, "Measured: the contact forces in the anchor").
+    p_.SetAnchor(ptc ? std::max(rho_floor, force_residual / (move * dmean)) : 0.0, pp.ptc_anchor_forces);
     checked_.clear();
     history_.clear();
     stalled_ = false;

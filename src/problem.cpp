@@ -71,6 +71,10 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                             "", ptc_easy_its, &ptc_easy_its, nullptr));
   PetscCall(PetscOptionsInt("-ptc_stall_its", "pseudo-transient continuation: an inner solve that has not halved its residual after this many Newton iterations is cut short and retried with more damping (one that has ends there)",
                             "", ptc_stall_its, &ptc_stall_its, nullptr));
+  PetscCall(PetscOptionsBool("-ptc_anchor_forces",
+                             "pseudo-transient continuation: anchor the forces of closed and sticking contacts as well as "
+                             "the bodies (a compliance 0.1 rho / E^2 on their rows, gone at the accepted equilibrium)",
+                             "", ptc_anchor_forces, &ptc_anchor_forces, nullptr));
   PetscCall(PetscOptionsInt("-ptc_max_steps", "pseudo-time steps per sub-step before it counts as failed (the load step is then cut)",
                             "", ptc_max_steps, &ptc_max_steps, nullptr));
   PetscCall(PetscOptionsReal("-level_force_rtol",
@@ -718,11 +722,14 @@ std::string CompactionProblem::DescribeUnknown(PetscInt where) const {
   return "wall";
 }
 
-void CompactionProblem::SetAnchor(double rho) {
+void CompactionProblem::SetAnchor(double rho, bool forces) {
   rho_anchor_ = rho;
+  lambda_anchor_.clear();
+  lambda_t_anchor_.clear();
   if (rho > 0.0) {
     anchor_.assign(u_.begin(), u_.end());
     anchor_.insert(anchor_.end(), w_, w_ + 4);
+    if (forces) lambda_anchor_ = lambda_, lambda_t_anchor_ = lambda_t_;
   }
 }
 
@@ -1281,7 +1288,7 @@ LayoutSizes CompactionProblem::Sizes() {
 double CompactionProblem::ProximalDiagonal(PetscInt i) const {
   if (i >= MultiplierOffset()) return -params_.prox_eta;
   if (i >= GaugeOffset()) return 0.0;
-  return (params_.prox_eta * params_.young + rho_anchor_) * prox_weight_[i];
+  return params_.prox_eta * params_.young * prox_weight_[i];
 }
 
 PetscErrorCode CompactionProblem::EvaluateResidual(Vec z, Vec F) {

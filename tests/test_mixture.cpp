@@ -131,8 +131,11 @@ TEST(Mixture, AllDeformableLatticeUsesNodeSegmentContacts) {
   CheckSignoriniCoulomb(*problem, 0.02, "deformable lattice");
 }
 
-// Jacobian of a converged, then perturbed, frictional lattice vs central differences.
-void CheckJacobian(std::unique_ptr<CompactionProblem> problem, const char *label) {
+// Jacobian of a converged, then perturbed, frictional lattice vs central
+// differences; with rho > 0 the pseudo-transient anchor's terms (on bodies,
+// walls and contact forces: SetAnchor) are in the residual and must be in the
+// Jacobian.
+void CheckJacobian(std::unique_ptr<CompactionProblem> problem, const char *label, double rho = 0.0) {
   ASSERT_TRUE(problem);
   LoadControlParameters load;
   double step = -1.0;
@@ -140,6 +143,7 @@ void CheckJacobian(std::unique_ptr<CompactionProblem> problem, const char *label
   ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.02, &step, &rep));
   // Open a new load step so that the slip is measured from the converged state.
   problem->MarkStepStart();
+  problem->SetAnchor(rho, true);
   Vec z, F, Fp, Fm;
   ASSERT_PETSC(problem->CreateGlobalVector(&z));
   ASSERT_PETSC(problem->PackState(z));
@@ -209,6 +213,10 @@ void CheckJacobian(std::unique_ptr<CompactionProblem> problem, const char *label
 // A checkerboard has every pair type but deformable-deformable.
 TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
   CheckJacobian(Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; }), "frictional checkerboard");
+}
+
+TEST(Mixture, AnchoredJacobianMatchesFiniteDifferences) {
+  CheckJacobian(Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; }), "anchored frictional checkerboard", 1.0);
 }
 
 // Four deformable disks in contact through the mortar gap (-contact_deformable mortar).

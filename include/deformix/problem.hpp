@@ -50,7 +50,8 @@
 // at the symmetric equilibrium of the single-particle test, and is reported.
 //
 // Packings (ptc_move > 0): the pseudo-transient term rho D (z - z_anchor)
-// on the body and wall rows (SetAnchor), which the level solvers drive.
+// on the body and wall rows, and its counterpart on the contact forces
+// (SetAnchor), which the level solvers drive.
 //
 // Parallel layout. Particles are the unit of ownership: METIS partitions the
 // particle graph (vertices weighted by unknowns, edges = contact candidates;
@@ -110,6 +111,7 @@ struct ProblemParameters {
   PetscInt ptc_easy_its = 8;     // the move grows by 1.25 after an inner solve of at most this many Newton iterations
   PetscInt ptc_stall_its = 6;     // an inner solve that has not halved its residual after this many Newton iterations is cut short
   PetscInt ptc_max_steps = 1000; // pseudo-time steps per sub-step before it counts as failed
+  PetscBool ptc_anchor_forces = PETSC_FALSE;  // anchored: the contact forces of closed and sticking contacts anchored too (SetAnchor)
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
@@ -259,6 +261,12 @@ class CompactionProblem {
   // residual that an inexact pseudo-time step leaves, far below the level's
   // tolerance on forces.
   static constexpr double kSlipTie = 1e-8;
+  // The contact forces' share of the pseudo-transient anchor (SetAnchor): a
+  // closed or sticking contact's gap or slip may differ from its row's zero
+  // by chi (lambda - lambda_a), chi = kMultiplierAnchor rho / E^2, during a
+  // pseudo-time step (docs/level-solver-measurements.md, "Measured: the
+  // contact forces in the anchor").
+  static constexpr double kMultiplierAnchor = 0.1;
   // A state the first Newton step of a load step can start from: no element
   // inverted, no overlap deeper than overlap_limit <d> (BeginLoadStep).
   bool PredictionAdmissible(double overlap_limit) const;
@@ -281,9 +289,13 @@ class CompactionProblem {
   PetscErrorCode Residual(Vec z, Vec F) { return EvaluateResidual(z, F); }
   PetscErrorCode NewtonMatrix(Vec z, Mat J);
   // Pseudo-transient anchor: with rho > 0 the residual gets rho D (z - z_a)
-  // on the body and wall rows and the Newton matrix rho D, z_a the current
-  // state; rho = 0 removes the term (EndLoadStep does).
-  void SetAnchor(double rho);
+  // on the body and wall rows, z_a the current state, and with forces also
+  // the kinematic contact rows (a closed contact's c_n g, a sticking one's
+  // c_t s) get the compliance term c chi (lambda - lambda_a),
+  // chi = kMultiplierAnchor rho / E^2 (contact_pairs.cpp); the Newton matrix
+  // gets their derivatives. rho = 0 removes both (EndLoadStep does), so an
+  // equilibrium is the same with or without them.
+  void SetAnchor(double rho, bool forces = false);
   double AnchorWeight() const { return rho_anchor_; }
   // The enthalpy H = sum of the deformable disks' strain energies + P x box
   // area at the last residual evaluation (+inf where an element inverted):
@@ -447,8 +459,9 @@ class CompactionProblem {
   const std::vector<ContactCandidate> &Candidates() const { return candidates_; }
   const std::vector<double> &Multipliers() const { return lambda_; }
   const std::vector<double> &TangentialMultipliers() const { return lambda_t_; }
-  // What the Newton matrix adds to the true Jacobian on diagonal entry i:
-  // rho (r^2 rho on rigid rotations) on body and wall unknowns, -prox_eta on multipliers.
+  // What the Newton matrix adds to the Jacobian of the residual on diagonal
+  // entry i: prox_eta E (r^2 times that on rigid rotations) on body and wall
+  // unknowns, -prox_eta on multipliers (the anchor terms are in the residual).
   double ProximalDiagonal(PetscInt i) const;
   // Contact states (0 open, 1 closed/stick, 2 sliding) at the last residual evaluation.
   const std::vector<char> &ActiveSet() const { return active_now_; }
@@ -585,6 +598,7 @@ class CompactionProblem {
   bool inverted_ = false;
   double rho_anchor_ = 0.0;         // pseudo-transient weight (0: plain Newton)
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
+  std::vector<double> lambda_anchor_, lambda_t_anchor_;  // contact forces at the anchor (per candidate; empty: not anchored)
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
   std::vector<PetscScalar> coo_values_;
   double merit_ = 0.0;                            // Merit(): summed over ranks by FormResidual
