@@ -148,8 +148,8 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
   // as rho grows while those rows still ask for an exact gap and slip: in a
   // cluster of rigid disks with more closed contacts than motions, the
   // kinematic error that a change of the active set leaves can then only be
-  // absorbed by the forces, which jump by about rho times it (forces of
-  // 10 E <d> from gaps of 1e-5 <d> at rho = 1e5 E). With the term the forces
+  // absorbed by the forces, by amounts that grow with rho (up to 18 E <d> at
+  // P/E 0.3 and rho = 1e5 E, with gaps of 1e-5 <d>). With the term the forces
   // are held by the anchor as the bodies are; it vanishes with rho, so
   // every accepted level is exact Coulomb and Signorini.
   const bool anchored = rho_anchor_ > 0.0 && lambda_anchor_.size() == candidates_.size();
