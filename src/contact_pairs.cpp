@@ -179,7 +179,7 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
       if (lt_dof >= 0) slip_now_[c] = k.slip;
     }
     // The anchor term's coefficients on this contact's kinematic rows (0 on force rows).
-    const double anchor_n = chi * ncp.d_gap * (ncp.d_lambda == 0.0 ? 1.0 : 0.0);
+    const double anchor_n = ncp.d_lambda == 0.0 ? chi * ncp.d_gap : 0.0;
     const double anchor_t = lt_dof >= 0 && tan.state == kClosed ? chi * tan.d_slip : 0.0;
     if (F) {
       if (anchor_n != 0.0) F[ln_dof] += anchor_n * (lam_n - lambda_anchor_[c]);
