@@ -73,7 +73,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                             "", ptc_stall_its, &ptc_stall_its, nullptr));
   PetscCall(PetscOptionsBool("-ptc_anchor_forces",
                              "pseudo-transient continuation: anchor the forces of closed and sticking contacts as well as "
-                             "the bodies (a compliance 0.1 rho / E^2 on their rows, gone at the accepted equilibrium)",
+                             "the bodies (a compliance proportional to rho on their rows, gone at the accepted "
+                             "equilibrium); false anchors the bodies only",
                              "", ptc_anchor_forces, &ptc_anchor_forces, nullptr));
   PetscCall(PetscOptionsInt("-ptc_max_steps", "pseudo-time steps per sub-step before it counts as failed (the load step is then cut)",
                             "", ptc_max_steps, &ptc_max_steps, nullptr));

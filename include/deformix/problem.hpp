@@ -111,7 +111,7 @@ struct ProblemParameters {
   PetscInt ptc_easy_its = 8;     // the move grows by 1.25 after an inner solve of at most this many Newton iterations
   PetscInt ptc_stall_its = 6;     // an inner solve that has not halved its residual after this many Newton iterations is cut short
   PetscInt ptc_max_steps = 1000; // pseudo-time steps per sub-step before it counts as failed
-  PetscBool ptc_anchor_forces = PETSC_FALSE;  // anchored: the contact forces of closed and sticking contacts anchored too (SetAnchor)
+  PetscBool ptc_anchor_forces = PETSC_TRUE;  // anchored: the contact forces of closed and sticking contacts anchored too (SetAnchor)
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
