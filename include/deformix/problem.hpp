@@ -50,8 +50,8 @@
 // at the symmetric equilibrium of the single-particle test, and is reported.
 //
 // Packings (ptc_move > 0): the pseudo-transient term rho D (z - z_anchor)
-// on the body and wall rows, and with -ptc_anchor_forces its counterpart on
-// the contact forces (SetAnchor), which the level solvers drive.
+// on the body and wall rows, and its counterpart on the contact forces
+// (-ptc_anchor_forces, default true; SetAnchor), which the level solvers drive.
 //
 // Parallel layout. Particles are the unit of ownership: METIS partitions the
 // particle graph (vertices weighted by unknowns, edges = contact candidates;
