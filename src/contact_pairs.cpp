@@ -138,10 +138,10 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
   const double c_n = params_.ncp_scale * params_.young, c_t = c_n, mu_f = FrictionActive() ? params_.friction : 0.0;
   // Dual proximal term: -delta on the multiplier diagonal of the Newton matrix.
   // Redundant constraints (hyperstatic rigid contacts, a square lattice) leave
-  // the multipliers indeterminate and the KKT matrix singular; the term keeps
-  // the indeterminate part at its current value and, like rho, never enters
-  // the residual.
-  const double dual_reg = params_.prox_eta;
+  // the multipliers indeterminate and the KKT matrix singular; with the term
+  // a Newton step moves the indeterminate part by (row residual) / delta
+  // (SetDualRegularization) and, like rho, it never enters the residual.
+  const double dual_reg = DualRegularization();
   // Pseudo-transient term on the contact forces (SetAnchor with forces): the
   // kinematic rows (c_n g of a closed contact, c_t s of a sticking one) get
   // c chi (lambda - lambda_a). The anchor on the bodies alone freezes them

@@ -1287,7 +1287,7 @@ LayoutSizes CompactionProblem::Sizes() {
 }
 
 double CompactionProblem::ProximalDiagonal(PetscInt i) const {
-  if (i >= MultiplierOffset()) return -params_.prox_eta;
+  if (i >= MultiplierOffset()) return -DualRegularization();
   if (i >= GaugeOffset()) return 0.0;
   return params_.prox_eta * params_.young * prox_weight_[i];
 }
@@ -1431,6 +1431,7 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure, LoadPredictor p
 PetscErrorCode CompactionProblem::EndLoadStep(bool converged, SolveReport *report) {
   PetscFunctionBeginUser;
   rho_anchor_ = 0.0;
+  dual_reg_ = -1.0;
   if (!converged) {
     RestoreState(step_saved_);
     pressure_ = step_saved_pressure_;

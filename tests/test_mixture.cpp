@@ -42,9 +42,10 @@ namespace {
 // n x n disks of diameter 1 on a unit square grid; pattern(i, j) says which are deformable.
 template <class Pattern>
 std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern deformable, bool mortar = false,
-                                           int triangles = 92) {
+                                           int triangles = 92, double prox_eta = 1e-8) {
   ProblemParameters p;
   p.friction = friction;
+  p.prox_eta = prox_eta;
   p.deformable_contact = mortar ? DeformableContact::Mortar : DeformableContact::NodeToSegment;
   p.constrain_rotation = PETSC_FALSE;
   p.ptc_move = 0.02;  // as the compact driver: pseudo-transient continuation
@@ -222,6 +223,59 @@ TEST(Mixture, AnchoredJacobianMatchesFiniteDifferences) {
 // Four deformable disks in contact through the mortar gap (-contact_deformable mortar).
 TEST(Mixture, MortarFrictionalJacobianMatchesFiniteDifferences) {
   CheckJacobian(Lattice(2, 0.4, [](int, int) { return true; }, true, 40), "frictional mortar lattice");
+}
+
+// The dual proximal term of anchored's end game (SetDualRegularization): it
+// is the multiplier diagonal of the Newton matrix and nothing else, it cannot
+// exceed prox_eta, and it lasts until the load step ends.
+TEST(Mixture, DualRegularizationIsTheMultiplierDiagonalUntilTheLoadStepEnds) {
+  const double eta = 1e-4;  // large enough to be seen against the matrix entries
+  auto problem = Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; }, false, 92, eta);
+  ASSERT_TRUE(problem);
+  LoadControlParameters load;
+  double step = -1.0;
+  LevelReport rep;
+  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.02, &step, &rep));
+  Vec z;
+  ASSERT_PETSC(problem->CreateGlobalVector(&z));
+  ASSERT_PETSC(problem->PackState(z));
+  PetscInt n;
+  ASSERT_PETSC(VecGetSize(z, &n));
+  const double small = 1e-6;
+  Mat Js, Jd;
+  problem->SetDualRegularization(small);
+  ASSERT_PETSC(problem->EvaluateJacobian(z, &Js));
+  problem->SetDualRegularization(1.0);  // above prox_eta: prox_eta
+  EXPECT_EQ(problem->DualRegularization(), eta);
+  ASSERT_PETSC(problem->EvaluateJacobian(z, &Jd));
+  int multipliers = 0;
+  for (PetscInt i = 0; i < n; ++i) {
+    PetscScalar a, b;
+    ASSERT_PETSC(MatGetValues(Js, 1, &i, 1, &i, &a));
+    ASSERT_PETSC(MatGetValues(Jd, 1, &i, 1, &i, &b));
+    if (problem->ProximalDiagonal(i) < 0.0) {  // a multiplier row: -delta on its diagonal
+      ++multipliers;
+      EXPECT_EQ(problem->ProximalDiagonal(i), -eta);
+      EXPECT_NEAR(a - b, eta - small, 1e-14) << "row " << i;
+    } else {
+      EXPECT_EQ(a, b) << "row " << i;
+    }
+  }
+  EXPECT_GT(multipliers, 0);
+  // Nothing off the diagonal changes.
+  ASSERT_PETSC(MatAXPY(Jd, -1.0, Js, DIFFERENT_NONZERO_PATTERN));
+  PetscReal frobenius;
+  ASSERT_PETSC(MatNorm(Jd, NORM_FROBENIUS, &frobenius));
+  EXPECT_NEAR(frobenius, std::sqrt(double(multipliers)) * (eta - small), 1e-12);
+  // The end of a load step (converged or undone) restores prox_eta.
+  problem->SetDualRegularization(small);
+  ASSERT_PETSC(problem->BeginLoadStep(0.03));
+  SolveReport undone;
+  ASSERT_PETSC(problem->EndLoadStep(false, &undone));
+  EXPECT_EQ(problem->DualRegularization(), eta);
+  MatDestroy(&Js);
+  MatDestroy(&Jd);
+  VecDestroy(&z);
 }
 
 TEST(CoulombLaw, StickSlipAndOpenBranches) {

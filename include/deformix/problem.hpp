@@ -74,6 +74,7 @@
 #pragma once
 #include <petscsnes.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -297,6 +298,13 @@ class CompactionProblem {
   // equilibrium is the same with or without them.
   void SetAnchor(double rho, bool forces = false);
   double AnchorWeight() const { return rho_anchor_; }
+  // The dual proximal term -delta on the multiplier diagonal of the Newton
+  // matrix (contact_pairs.cpp): prox_eta unless set smaller here, until
+  // EndLoadStep. In a hyperstatic cluster the indeterminate contact forces
+  // move by (contact row residual) / delta per Newton step; anchored's end
+  // game (level_solver.cpp) lowers delta so that they move by about P <d>.
+  void SetDualRegularization(double delta) { dual_reg_ = std::min(delta, params_.prox_eta); }
+  double DualRegularization() const { return dual_reg_ < 0.0 ? params_.prox_eta : dual_reg_; }
   // The enthalpy H = sum of the deformable disks' strain energies + P x box
   // area at the last residual evaluation (+inf where an element inverted):
   // frictionless equilibria are its constrained stationary points (the
@@ -596,7 +604,8 @@ class CompactionProblem {
   std::vector<double> slip_now_;       // per candidate, at the last residual: incremental slip (own frictional contacts; ContactPenalty)
   std::vector<double> tresca_bound_;   // per candidate: mu lambda_n lagged by LagContactWeights
   bool inverted_ = false;
-  double rho_anchor_ = 0.0;         // pseudo-transient weight (0: plain Newton)
+  double rho_anchor_ = 0.0;
+  double dual_reg_ = -1.0;          // < 0: prox_eta (SetDualRegularization)         // pseudo-transient weight (0: plain Newton)
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
   std::vector<double> lambda_anchor_, lambda_t_anchor_;  // contact forces at the anchor (per candidate; empty: not anchored)
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
