@@ -1060,9 +1060,9 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       // mostly the indeterminate forces of hyperstatic clusters (rigid disks
       // with more closed and sticking contacts than motions): their kinematic
       // rows can be made exact only by unloading a redundant contact, and
-      // each Newton step moves those forces by (row residual) / delta, with
-      // delta = prox_eta about 1e-3 P <d> per step at P/E 0.6 on 1500 disks,
-      // for tens of steps. The dual term is lowered so that they move by
+      // each Newton step moves those forces by (row residual) / delta: with
+      // delta = prox_eta by about 1e-3 P <d> at P/E 0.6 on 1500 disks, for
+      // tens of steps. The dual term is lowered so that they move by
       // about P <d> per step, as rho lets a body move by about m <d>
       // (docs/level-solver-measurements.md, "Measured: the end game of a
       // frictional level").

@@ -8,7 +8,7 @@
 //   gauge row (rotation of a frictionless deformable body): (E / R) G . dx
 // K is the Hessian of the Lagrangian (symmetric: hyperelastic elements, the
 // walls' P x area, -lambda d2g of the contacts) plus the diagonal shifts,
-// delta = -prox_eta the dual term. Only the multiplier rows break symmetry.
+// -delta the dual term (DualRegularization). Only the multiplier rows break symmetry.
 // An inactive multiplier's step is known from its own row, so its column
 // moves to the right-hand side (L: b_a -= J_ac b_c / (1 - delta), the
 // column zeroed); the active normal rows times -1 / c_n and the gauge rows
@@ -35,7 +35,7 @@ PetscErrorCode CompactionProblem::SymmetrizeNewtonMatrix(Mat J, bool *done) {
   } else {
     PetscCall(MatCopy(J, J_unsymmetric_, SAME_NONZERO_PATTERN));
   }
-  const double delta = params_.prox_eta, c_n = params_.ncp_scale * params_.young;
+  const double delta = DualRegularization(), c_n = params_.ncp_scale * params_.young;
   PetscScalar *scale, *pivot, *keep;
   PetscCall(VecSet(sym_scale_, 1.0));
   PetscCall(VecSet(sym_pivot_, 0.0));

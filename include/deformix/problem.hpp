@@ -604,8 +604,8 @@ class CompactionProblem {
   std::vector<double> slip_now_;       // per candidate, at the last residual: incremental slip (own frictional contacts; ContactPenalty)
   std::vector<double> tresca_bound_;   // per candidate: mu lambda_n lagged by LagContactWeights
   bool inverted_ = false;
-  double rho_anchor_ = 0.0;
-  double dual_reg_ = -1.0;          // < 0: prox_eta (SetDualRegularization)         // pseudo-transient weight (0: plain Newton)
+  double rho_anchor_ = 0.0;         // pseudo-transient weight (0: plain Newton)
+  double dual_reg_ = -1.0;          // dual proximal term (< 0: prox_eta; SetDualRegularization)
   std::vector<double> anchor_;      // body and wall unknowns the pseudo-transient term pulls towards
   std::vector<double> lambda_anchor_, lambda_t_anchor_;  // contact forces at the anchor (per candidate; empty: not anchored)
   std::vector<double> prox_weight_; // D of the proximal terms, per body and wall unknown (set with the layout)
