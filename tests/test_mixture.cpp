@@ -42,10 +42,10 @@ namespace {
 // n x n disks of diameter 1 on a unit square grid; pattern(i, j) says which are deformable.
 template <class Pattern>
 std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern deformable, bool mortar = false,
-                                           int triangles = 92, double prox_eta = 1e-8) {
+                                           int triangles = 92, double prox_eta = -1.0) {
   ProblemParameters p;
   p.friction = friction;
-  p.prox_eta = prox_eta;
+  if (prox_eta > 0.0) p.prox_eta = prox_eta;  // else the default
   p.deformable_contact = mortar ? DeformableContact::Mortar : DeformableContact::NodeToSegment;
   p.constrain_rotation = PETSC_FALSE;
   p.ptc_move = 0.02;  // as the compact driver: pseudo-transient continuation
