@@ -1010,9 +1010,6 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     PetscInt where;
     PetscCall(p_.ForceResidual(F_, &force_residual, &where));
     report->residual = true_norm;
-    // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
-    double part[5];
-    PetscCall(p_.ResidualBlocks(F_, part));
     const double phi = p_.PackingFraction();
     // The balance of every body and the largest contact row (exact below the
     // Newton tolerance, per row as in newton's criterion: a norm over all
@@ -1020,6 +1017,9 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     CompactionProblem::Balance b;
     PetscCall(p_.BodyBalance(F_, &b));
     if (prm_.ptc_monitor) {
+      // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
+      double part[5];
+      PetscCall(p_.ResidualBlocks(F_, part));
       PetscCall(PetscPrintf(comm_, "    largest force %.3e on %s\n", force_residual, p_.DescribeUnknown(where).c_str()));
       PetscCall(PetscPrintf(comm_,
                             "  ptc %3d  |R| %.3e (body %.1e wall %.1e gauge %.1e normal %.1e tangential %.1e; largest contact row %.1e)  |F|_inf %.3e  phi %.7f  move %.2e  its %" PetscInt_FMT "%s\n",
