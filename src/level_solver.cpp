@@ -925,6 +925,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   double move = pp.ptc_move;
   const int max_outer = static_cast<int>(pp.ptc_max_steps);
   int failures = 0;  // failed inner solves in a row
+  double rho_retry = 0.0;  // the least rho_a of a retry from the same anchor
   double phi_last = -1.0;
   double force_residual = 0.0;
   if (ptc) {
@@ -946,7 +947,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     if (ptc) p_.MarkStepStart();
     // -ptc_anchor_forces: the contact forces too (SetAnchor; docs/level-solver-
     // measurements.md, "Measured: the contact forces in the anchor").
-    p_.SetAnchor(ptc ? std::max(rho_floor, force_residual / (move * dmean)) : 0.0, pp.ptc_anchor_forces);
+    p_.SetAnchor(ptc ? std::max({rho_floor, rho_retry, force_residual / (move * dmean)}) : 0.0, pp.ptc_anchor_forces);
     checked_.clear();
     history_.clear();
     stalled_ = false;
@@ -983,8 +984,12 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       // function cycles on weakly active contacts, took more iterations with
       // both deformable contact laws: docs/level-solver-measurements.md,
       // "Measured: the knobs of anchored".)
+      // The retry's rho_a is at least 4 times the failed one's: with rho_a at
+      // its floor prox_eta E (a small |F|_inf near the end of a level) a
+      // quarter of the move alone would repeat the same inner solve.
       if (ptc && outer < max_outer && ++failures <= 8) {
         move *= 0.25;
+        rho_retry = 4.0 * p_.AnchorWeight();
         continue;
       }
       PetscCall(p_.EndLoadStep(false, report));
@@ -1079,6 +1084,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       PetscFunctionReturn(0);
     }
     failures = 0;
+    rho_retry = 0.0;
     if (its <= pp.ptc_easy_its && !stalled_) move = std::min(kMoveGrowth * move, 1.0);
   }
   PetscCall(p_.EndLoadStep(true, report));
