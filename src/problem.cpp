@@ -80,8 +80,8 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                             "", ptc_max_steps, &ptc_max_steps, nullptr));
   PetscCall(PetscOptionsReal("-level_force_rtol",
                              "accept a level by the paper's criterion besides exact equilibrium (0: only exact "
-                             "equilibrium): anchored, the largest nodal force below this x P <d>; newton, every body's net "
-                             "force and torque, nodal force and contact row below this x P <d> (<d>^2); phi settled",
+                             "equilibrium): every nodal force and every body's net force and torque below this x P <d> "
+                             "(<d>^2), P_sigma/P within this of 1, every contact row exact, phi settled",
                              "", level_force_rtol, &level_force_rtol, nullptr));
   PetscCall(PetscOptionsReal("-level_phi_rtol", "... and the packing fraction changed by less than this (relative) in the last pseudo-time step",
                              "", level_phi_rtol, &level_phi_rtol, nullptr));
