@@ -19,7 +19,30 @@ std::vector<double> ParticleCentres(const CompactionProblem &problem) {
     problem.RigidPosition(r, &centre[2 * problem.RigidBodies()[r].particle], nullptr);
   return centre;
 }
+
+// The branch vector l of a contact force on the slave (ComputeObservables).
+void BranchVector(const ContactForce &f, const std::vector<double> &centre, double l[2]) {
+  const int a = f.master_particle, b = f.slave_particle;
+  if (a >= 0) {
+    l[0] = centre[2 * b] - centre[2 * a], l[1] = centre[2 * b + 1] - centre[2 * a + 1];
+  } else {
+    l[0] = -(f.point[0] - centre[2 * b]), l[1] = -(f.point[1] - centre[2 * b + 1]);
+  }
+}
 }  // namespace
+
+double MeanContactStress(const CompactionProblem &problem) {
+  const StateSummary s = problem.Summary();
+  const std::vector<double> centre = ParticleCentres(problem);
+  double trace = 0.0;
+  for (const ContactForce &f : problem.ContactForces()) {
+    if (!(f.normal_multiplier > 0.0)) continue;
+    double l[2];
+    BranchVector(f, centre, l);
+    trace += f.force[0] * l[0] + f.force[1] * l[1];
+  }
+  return 0.5 * trace / (s.box_width * s.box_height);
+}
 
 PackingObservables ComputeObservables(const CompactionProblem &problem) {
   PackingObservables o;
@@ -47,11 +70,10 @@ PackingObservables ComputeObservables(const CompactionProblem &problem) {
     const bool counts = f.normal_multiplier > carrying;
     o.contacts += counts;
     double l[2];
+    BranchVector(f, centre, l);
     if (a >= 0) {
-      l[0] = centre[2 * b] - centre[2 * a], l[1] = centre[2 * b + 1] - centre[2 * a + 1];
       if (counts) pairs.insert({std::min(a, b), std::max(a, b)}), neighbours[a].insert(b), neighbours[b].insert(a);
     } else {
-      l[0] = -(f.point[0] - centre[2 * b]), l[1] = -(f.point[1] - centre[2 * b + 1]);
       // Which wall: the force direction tells.
       const int wall = f.force[0] > 0 ? -1 : f.force[0] < 0 ? -2 : f.force[1] > 0 ? -3 : -4;
       if (counts) neighbours[b].insert(wall);

@@ -74,6 +74,7 @@ void CheckSignoriniCoulomb(const CompactionProblem &problem, double P, const cha
   }
   const PackingObservables o = ComputeObservables(problem);
   EXPECT_NEAR(o.mean_stress, P, 1e-8 * P) << label << ": contact stress vs imposed pressure";
+  EXPECT_NEAR(MeanContactStress(problem), o.mean_stress, 1e-12 * P) << label << ": P_sigma alone vs the stress tensor";
 }
 
 TEST(Mixture, RigidSquareLatticeCarriesPdAtEveryContact) {

@@ -37,6 +37,9 @@ struct PackingObservables {
 };
 
 PackingObservables ComputeObservables(const CompactionProblem &problem);
+// P_sigma alone (the mean of ComputeObservables' stress, one pass over the
+// contact forces): the virial part of the level criteria.
+double MeanContactStress(const CompactionProblem &problem);
 
 // The contact network (force chains): one segment per force-carrying
 // particle pair, between the two particle centres (rigid centres, deformable
