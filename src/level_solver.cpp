@@ -943,6 +943,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   const int max_outer = static_cast<int>(pp.ptc_max_steps);
   int failures = 0;  // failed inner solves in a row
   double rho_retry = 0.0;  // the least rho_a of a retry from the same anchor
+  double rho_end_game = 0.0;  // the least rho_a once the end game has begun
   double phi_last = -1.0;
   double force_residual = 0.0;
   if (ptc) {
@@ -964,11 +965,13 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     if (ptc) p_.MarkStepStart();
     // -ptc_anchor_forces: the contact forces too (SetAnchor; docs/level-solver-
     // measurements.md, "Measured: the contact forces in the anchor").
-    p_.SetAnchor(ptc ? std::max({rho_floor, rho_retry, force_residual / (move * dmean)}) : 0.0, pp.ptc_anchor_forces);
+    p_.SetAnchor(ptc ? std::max({rho_floor, rho_retry, rho_end_game, force_residual / (move * dmean)}) : 0.0,
+                pp.ptc_anchor_forces);
     checked_.clear();
     history_.clear();
     stalled_ = false;
     PetscCall(SNESSolve(snes_, nullptr, z_));
+    const double rho_solved = p_.AnchorWeight();
     ++report->inner_solves;
     PetscInt its;
     PetscReal atol, rtol, stol;
@@ -1092,6 +1095,15 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       // (docs/level-solver-measurements.md, "Measured: the end game of a
       // frictional level").
       p_.SetDualRegularization(b.contact_row / (pressure * dmean));
+      // rho_a stays at least that of the pseudo-time step that began the end
+      // game. Without it rho_a falls with |F|_inf (1e-13 E <d>) to its floor,
+      // and the first Newton step from such an anchor moves the indeterminate
+      // forces by about P <d> with the bodies held by nothing: thousands of
+      // contacts switch and the inner solve fails (8 of the 15 pseudo-time
+      // steps of a 1500-disk end game; docs/level-solver-measurements.md,
+      // "Measured: rho_a held in the end game"). rho never enters the
+      // residual, so the equilibrium is the same.
+      if (rho_end_game == 0.0) rho_end_game = rho_solved;
     }
     phi_last = phi;
     // Did not settle, or diverging: a failed solve, the load controller cuts the step.
