@@ -681,7 +681,7 @@ class AnchoredContinuation {
   std::vector<std::uint64_t> history_;      // hashes of the contact states of the last Newton iterates (DetectCycle)
   bool backtrack_ = false;                  // DetectCycle found an active-set cycle: Backtrack this step
   double fnorm0_ = 0.0;
-  bool stalled_ = false;  // the last inner solve ended at ptc_stall_its with |G| halved (Converged)
+  bool stalled_ = false;  // the last inner solve ended at ptc_stall_its with |G| decreased (Converged)
 };
 
 PetscErrorCode AnchoredContinuation::Destroy() {

@@ -82,9 +82,11 @@
 //   full, except that a step taken from contact states equal to those of
 //   two or three iterations ago (an active-set cycle, typically stick <->
 //   slip on the edge of the cone) is backtracked
-//   until |R| decreases; an inner solve that has not halved its residual in
-//   -ptc_stall_its (6) iterations is cut short and retried with more damping,
-//   one that has halved it ends there (an inexact pseudo-time step). A
+//   until |R| decreases; an inner solve short of its 100-fold drop after
+//   -ptc_stall_its (6) iterations is cut short: its iterate is an inexact
+//   pseudo-time step if its residual decreased, else it is retried with
+//   more damping. In the end game rho_a is held at least at its value when
+//   the end game began. A
 //   sub-step whose force residual grows beyond 100 times the larger of its
 //   start value and P <d> has failed (kDivergedForce): the controller cuts it.
 //   The SNES and its callbacks live in level_solver.cpp over a small context.
