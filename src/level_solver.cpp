@@ -57,7 +57,7 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "", body_criterion, &body_criterion, nullptr));
   PetscCall(PetscOptionsBool("-ptc_monitor",
                              "anchored: one line per pseudo-time step (residual by block, largest unbalanced force "
-                             "and where it acts, phi, move)",
+                             "and where it acts, phi, move), every failed inner solve, and the step that begins the end game",
                              "", ptc_monitor, &ptc_monitor, nullptr));
   PetscCall(PetscOptionsBool("-newton_monitor",
                              "anchored: one line per Newton iteration (|R|, closed and sliding contacts, rho_a, "
@@ -1103,7 +1103,12 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       // steps of a 1500-disk end game; docs/level-solver-measurements.md,
       // "Measured: rho_a held in the end game"). rho never enters the
       // residual, so the equilibrium is the same.
-      if (rho_end_game == 0.0) rho_end_game = rho_solved;
+      if (rho_end_game == 0.0) {
+        rho_end_game = rho_solved;
+        if (prm_.ptc_monitor)
+          PetscCall(PetscPrintf(comm_, "  ptc %3d  end game: largest contact row %.1e, rho_a held at %.2e or more\n", outer,
+                                b.contact_row, rho_end_game));
+      }
     }
     phi_last = phi;
     // Did not settle, or diverging: a failed solve, the load controller cuts the step.
