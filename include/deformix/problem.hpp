@@ -110,7 +110,7 @@ struct ProblemParameters {
   double prox_eta = 1e-8;        // smallest rho / E
   double ptc_move = 0.0;         // pseudo-transient continuation: move per pseudo-time step / <d> (0: plain Newton)
   PetscInt ptc_easy_its = 8;     // the move grows by 1.25 after an inner solve of at most this many Newton iterations
-  PetscInt ptc_stall_its = 6;     // an inner solve short of its 100-fold residual drop after this many Newton iterations is cut short
+  PetscInt ptc_stall_its = 4;     // an inner solve short of its 100-fold residual drop after this many Newton iterations is cut short
   PetscInt ptc_max_steps = 1000; // pseudo-time steps per sub-step before it counts as failed
   PetscBool ptc_anchor_forces = PETSC_TRUE;  // anchored: the contact forces of closed and sticking contacts anchored too (SetAnchor)
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
