@@ -86,9 +86,9 @@
 //   -ptc_stall_its (4) iterations is cut short: its iterate is an inexact
 //   pseudo-time step if its residual decreased, else it is retried with
 //   more damping. In the end game rho_a is held at least at its value when
-//   the end game began. A
-//   sub-step whose force residual grows beyond 100 times the larger of its
-//   start value and P <d> has failed (kDivergedForce): the controller cuts it.
+//   the end game began. A sub-step whose force residual grows beyond 100
+//   times the larger of its start value and P <d> has failed
+//   (kDivergedForce): the controller cuts it.
 //   The SNES and its callbacks live in level_solver.cpp over a small context.
 // hybrid: a newton attempt of at most -level_attempt_its linearizations,
 //   started from the tangent predictor with overlaps up to 0.1 <d> admitted
