@@ -1,5 +1,5 @@
 // Contact pairs: the kinematics of every candidate type (the geometry
-// dispatch: walls, rigid-rigid, rigid-node, node-segment and mortar gaps,
+// dispatch: walls, rigid-rigid, rigid-node (or rigid-curve), node-segment and mortar gaps,
 // contact_law.hpp and the *_kinematics files for the formulas), their
 // contributions to the residual and the Newton matrix (NCP rows, contact
 // forces), and the contact forces of the current state for the observables.
@@ -34,6 +34,20 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       q0[nq] = present ? ref + z0[d] : 0.0;
       ++nq;
     }
+  };
+  // Mortar pairs: the slave nodes point-2 .. point+2 and the weights of node point's cell.
+  auto add_slave_cell = [&]() {
+    const DiskMesh &s = bodies_[c.body].mesh;
+    const int ns = static_cast<int>(s.boundary.size());
+    for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
+    MortarSupport support;
+    support.order = s.order;
+    support.vertex = s.order == 1 || c.point % 2 == 0;
+    for (int side = 0; side < 2; ++side) {
+      const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
+      support.length[side] = std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
+    }
+    return support;
   };
   const double *w = z + WallOffset();
   const PetscInt wall_dof = WallOffset() + c.wall;
@@ -83,6 +97,19 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       break;
     case ContactType::RigidNode:
       add_rigid(rigid_[c.master]);
+      if (params_.rigid_contact == RigidContact::Curve) {  // the curve through the slave nodes point-2 .. point+2
+        const DiskMesh &s = bodies_[c.body].mesh;
+        const int ns = static_cast<int>(s.boundary.size());
+        for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
+        double spacing = 0.0;  // reference node spacing: the mean of the two sub-segments at the node
+        for (int side = 0; side < 2; ++side) {
+          const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
+          spacing += 0.5 * std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
+        }
+        lc->k = rigid_curve(q, q0, rigid_[c.master].radius, spacing, hessians);
+        lc->slave_xy = 3, lc->slave_nodes = 5;
+        break;
+      }
       add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
       lc->k = rigid_node(q, q0, rigid_[c.master].radius);
       lc->slave_xy = 3;
@@ -94,17 +121,8 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       // master curve on the two segments around it.
       if (params_.deformable_contact == DeformableContact::Mortar) {
         // Mortar: seven master nodes around `segment`, the slave nodes point-2 .. point+2.
-        const DiskMesh &s = bodies_[c.body].mesh;
-        const int ns = static_cast<int>(s.boundary.size());
         for (int j = -3; j <= 3; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
-        for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
-        MortarSupport support;
-        support.order = s.order;
-        support.vertex = s.order == 1 || c.point % 2 == 0;
-        for (int side = 0; side < 2; ++side) {
-          const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
-          support.length[side] = std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
-        }
+        const MortarSupport support = add_slave_cell();
         lc->k = mortar_node(q, q0, support, hessians, &lc->beyond);
         lc->slave_xy = 14, lc->slave_nodes = 5;
         break;

@@ -310,4 +310,165 @@ PairKinematics curve_node(const double q[12], const double q0[12], bool hessians
   return k;
 }
 
+// A rigid disk against the smooth curve of a deformable boundary, over the
+// cell of boundary node m2 (the parameters t in [1/2, 1] of segment m1 -> m2
+// (s = 0) and [0, 1/2] of m2 -> m3 (s = 1); t_s = 1 or 0 is the node):
+//   g = min over the cell of  psi(t) = |c - x(t)| - rA + (w / 2) (t - t_s)^2,
+//   w = beta h^2 / rA  (h the reference node spacing).
+// With w = 0 this is the distance from the disk to the curve, without the
+// node-to-node bumps of rigid_node; but where the boundary wraps around the
+// disk (a conforming contact) |c - x(t)| is nearly constant over the cell,
+// the closest point is undetermined and the gap's Hessian (through
+// dt*/dq = -psi_tq / psi_tt) unbounded. The pull towards the node keeps
+// psi_tt >= w (1 / h^2 in t) there; on a straight boundary it leaves bumps
+// of beta / (1 + beta) of rigid_node's (beta -> infinity is rigid_node;
+// beta = kRigidCurvePull).
+// Where the minimum lies inside the cell: psi at t*(q) (psi_t = 0), with
+// the derivatives of the implicit function theorem as in curve_node; at
+// the cell's end: the fixed material point x(1/2), i.e. rigid_node against
+// it, plus w / 8. At the hand-over the two agree in value and gradient.
+namespace {
+
+// psi and its first two t-derivatives on segment s (see rigid_curve).
+void cell_objective(const double P[5][2], int s, double t, const double c[2], double w, double *psi, double *dpsi,
+                    double *d2psi) {
+  double x[2], a[2], b[2];
+  curve_point(P, s, t, x, a, b);
+  const double r[2] = {c[0] - x[0], c[1] - x[1]};
+  const double L = std::hypot(r[0], r[1]), ra = r[0] * a[0] + r[1] * a[1];
+  const double dt = t - (s == 0 ? 1.0 : 0.0);
+  *psi = L + 0.5 * w * dt * dt;
+  *dpsi = -ra / L + w * dt;
+  *d2psi = (a[0] * a[0] + a[1] * a[1] - r[0] * b[0] - r[1] * b[1]) / L - ra * ra / (L * L * L) + w;
+}
+
+// The minimum of psi over the cell's half on segment s: at an end of the
+// half where psi rises into it, else the root of psi_t bracketed by the
+// half (safeguarded Newton).
+void half_minimum(const double P[5][2], int s, const double c[2], double w, double *t_out, double *psi_out) {
+  double lo = s == 0 ? 0.5 : 0.0, hi = s == 0 ? 1.0 : 0.5, psi, dpsi, d2psi;
+  cell_objective(P, s, lo, c, w, &psi, &dpsi, &d2psi);
+  if (dpsi >= 0.0) {
+    *t_out = lo, *psi_out = psi;
+    return;
+  }
+  cell_objective(P, s, hi, c, w, &psi, &dpsi, &d2psi);
+  if (dpsi <= 0.0) {
+    *t_out = hi, *psi_out = psi;
+    return;
+  }
+  double t = 0.5 * (lo + hi);
+  for (int it = 0; it < 100 && hi - lo > 1e-15; ++it) {
+    cell_objective(P, s, t, c, w, &psi, &dpsi, &d2psi);
+    (dpsi < 0.0 ? lo : hi) = t;
+    const double newton = d2psi > 0.0 ? t - dpsi / d2psi : lo - 1.0;
+    const double next = newton > lo && newton < hi ? newton : 0.5 * (lo + hi);
+    if (std::fabs(next - t) < 1e-15) break;
+    t = next;
+  }
+  cell_objective(P, s, t, c, w, &psi, &dpsi, &d2psi);
+  *t_out = t, *psi_out = psi;
+}
+
+}  // namespace
+
+PairKinematics rigid_curve(const double q[13], const double q0[13], double rA, double spacing, bool hessians) {
+  PairKinematics k;
+  k.ndof = 13;
+  double P[5][2];
+  for (int j = 0; j < 5; ++j)
+    for (int c = 0; c < 2; ++c) P[j][c] = q[3 + 2 * j + c];
+  const double centre[2] = {q[0], q[1]};
+  const double w = kRigidCurvePull * spacing * spacing / rA;
+  int seg = 0;
+  double t = 0.0, psi = std::numeric_limits<double>::infinity();
+  for (int s = 0; s < 2; ++s) {
+    double ts, ps;
+    half_minimum(P, s, centre, w, &ts, &ps);
+    if (ps < psi) seg = s, t = ts, psi = ps;
+  }
+  if (t != 0.5) {
+    // Inside the cell: psi(q, t) in forward mode over the segment's four
+    // nodes (variables 0..7), the centre (8, 9) and t (10).
+    double Nb[4], dNb[4], d2Nb[4];
+    basis(t, Nb, dNb, d2Nb);
+    const double d3N[4] = {-3.0, 9.0, -9.0, 3.0};
+    Ad x[2], a[2], u[2], r[2];
+    for (int c = 0; c < 2; ++c) {
+      for (int i = 0; i < 4; ++i) {
+        const double Pc = q[3 + 2 * (seg + i) + c], dP = Pc - q0[3 + 2 * (seg + i) + c];
+        const int v = 2 * i + c;
+        x[c].v += Nb[i] * Pc, x[c].g[v] = Nb[i], x[c].g[kT] += dNb[i] * Pc, x[c].h[packed(kT, kT)] += d2Nb[i] * Pc;
+        a[c].v += dNb[i] * Pc, a[c].g[v] = dNb[i], a[c].g[kT] += d2Nb[i] * Pc, a[c].h[packed(kT, kT)] += d3N[i] * Pc;
+        u[c].v -= Nb[i] * dP, u[c].g[v] = -Nb[i], u[c].g[kT] -= dNb[i] * dP, u[c].h[packed(kT, kT)] -= d2Nb[i] * dP;
+        x[c].h[packed(v, kT)] = dNb[i], a[c].h[packed(v, kT)] = d2Nb[i], u[c].h[packed(v, kT)] = -dNb[i];
+      }
+      Ad p(q[c]);
+      p.g[8 + c] = 1.0;
+      r[c] = p - x[c];
+      u[c].v += q[c] - q0[c], u[c].g[8 + c] = 1.0;
+    }
+    Ad dt(t - (seg == 0 ? 1.0 : 0.0));
+    dt.g[kT] = 1.0;
+    const Ad rr = r[0] * r[0] + r[1] * r[1], inv_L = inv_sqrt(rr);
+    const Ad half_w(0.5 * w), w_ad(w);
+    const Ad gap = rr * inv_L + half_w * dt * dt;                                // psi + rA
+    const Ad f = w_ad * dt - (r[0] * a[0] + r[1] * a[1]) * inv_L;                 // psi_t
+    const Ad slip = (u[0] * a[0] + u[1] * a[1]) * inv_sqrt(a[0] * a[0] + a[1] * a[1]);
+    constexpr int nq = kV - 1;
+    const double f_t = f.g[kT];
+    double tq[nq], tqq[nq][nq];
+    for (int v = 0; v < nq; ++v) tq[v] = -f.g[v] / f_t;
+    const auto second = [&](const Ad &g, int v, int w2) {
+      return g.h[packed(v, w2)] + g.h[packed(v, kT)] * tq[w2] + tq[v] * g.h[packed(w2, kT)] + g.h[packed(kT, kT)] * tq[v] * tq[w2];
+    };
+    for (int v = 0; v < nq; ++v)
+      for (int w2 = v; w2 < nq; ++w2) tqq[v][w2] = tqq[w2][v] = -second(f, v, w2) / f_t;
+    const auto unknown = [seg](int v) { return v < 8 ? 3 + 2 * seg + v : v - 8; };
+    k.gap = gap.v - rA;
+    k.slip = slip.v - rA * (q[2] - q0[2]);  // the disk's contact point turns with it
+    k.normal[0] = -r[0].v * inv_L.v, k.normal[1] = -r[1].v * inv_L.v;  // from the disk towards the curve
+    for (int v = 0; v < nq; ++v) {
+      k.dgap[unknown(v)] = gap.g[v] + gap.g[kT] * tq[v];
+      k.dslip[unknown(v)] = slip.g[v] + slip.g[kT] * tq[v];
+      if (!hessians) continue;
+      for (int w2 = v; w2 < nq; ++w2) {
+        const double hg = second(gap, v, w2) + gap.g[kT] * tqq[v][w2], hs = second(slip, v, w2) + slip.g[kT] * tqq[v][w2];
+        k.d2gap[unknown(v) * 13 + unknown(w2)] = k.d2gap[unknown(w2) * 13 + unknown(v)] = hg;
+        k.d2slip[unknown(v) * 13 + unknown(w2)] = k.d2slip[unknown(w2) * 13 + unknown(v)] = hs;
+      }
+    }
+    k.dslip[2] = -rA;
+    return k;
+  }
+  // The cell's end x(1/2) of segment seg: a fixed combination of four nodes.
+  double N[4], dN[4], d2N[4], xe[2] = {0, 0}, xe0[2] = {0, 0};
+  basis(0.5, N, dN, d2N);
+  for (int c = 0; c < 2; ++c)
+    for (int i = 0; i < 4; ++i) xe[c] += N[i] * q[3 + 2 * (seg + i) + c], xe0[c] += N[i] * q0[3 + 2 * (seg + i) + c];
+  const double ql[5] = {q[0], q[1], q[2], xe[0], xe[1]}, ql0[5] = {q0[0], q0[1], q0[2], xe0[0], xe0[1]};
+  const PairKinematics pk = rigid_node(ql, ql0, rA);
+  k.gap = pk.gap + 0.125 * w, k.slip = pk.slip, k.normal[0] = pk.normal[0], k.normal[1] = pk.normal[1];
+  // Local unknown l of rigid_node -> (unknowns of q, coefficients).
+  int map_n[5], map_i[5][4];
+  double map_c[5][4];
+  for (int l = 0; l < 3; ++l) map_n[l] = 1, map_i[l][0] = l, map_c[l][0] = 1.0;
+  for (int c = 0; c < 2; ++c) {
+    map_n[3 + c] = 4;
+    for (int i = 0; i < 4; ++i) map_i[3 + c][i] = 3 + 2 * (seg + i) + c, map_c[3 + c][i] = N[i];
+  }
+  for (int l = 0; l < 5; ++l)
+    for (int a = 0; a < map_n[l]; ++a) {
+      k.dgap[map_i[l][a]] += map_c[l][a] * pk.dgap[l];
+      k.dslip[map_i[l][a]] += map_c[l][a] * pk.dslip[l];
+      if (!hessians) continue;
+      for (int m = 0; m < 5; ++m)
+        for (int b = 0; b < map_n[m]; ++b) {
+          k.d2gap[map_i[l][a] * 13 + map_i[m][b]] += map_c[l][a] * map_c[m][b] * pk.d2gap[l * 5 + m];
+          k.d2slip[map_i[l][a] * 13 + map_i[m][b]] += map_c[l][a] * map_c[m][b] * pk.d2slip[l * 5 + m];
+        }
+    }
+  return k;
+}
+
 }  // namespace deformix
