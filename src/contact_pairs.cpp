@@ -35,19 +35,16 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       ++nq;
     }
   };
-  // Mortar pairs: the slave nodes point-2 .. point+2 and the weights of node point's cell.
-  auto add_slave_cell = [&]() {
+  // Mortar and rigid-curve pairs: the slave's boundary nodes point-2 .. point+2, and the
+  // reference lengths of its sub-segments point-1 -> point and point -> point+1.
+  auto add_slave_window = [&](double length[2]) {
     const DiskMesh &s = bodies_[c.body].mesh;
     const int ns = static_cast<int>(s.boundary.size());
     for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
-    MortarSupport support;
-    support.order = s.order;
-    support.vertex = s.order == 1 || c.point % 2 == 0;
     for (int side = 0; side < 2; ++side) {
       const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
-      support.length[side] = std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
+      length[side] = std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
     }
-    return support;
   };
   const double *w = z + WallOffset();
   const PetscInt wall_dof = WallOffset() + c.wall;
@@ -98,15 +95,9 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
     case ContactType::RigidNode:
       add_rigid(rigid_[c.master]);
       if (params_.rigid_contact == RigidContact::Curve) {  // the curve through the slave nodes point-2 .. point+2
-        const DiskMesh &s = bodies_[c.body].mesh;
-        const int ns = static_cast<int>(s.boundary.size());
-        for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
-        double spacing = 0.0;  // reference node spacing: the mean of the two sub-segments at the node
-        for (int side = 0; side < 2; ++side) {
-          const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
-          spacing += 0.5 * std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
-        }
-        lc->k = rigid_curve(q, q0, rigid_[c.master].radius, spacing, hessians);
+        double length[2];
+        add_slave_window(length);
+        lc->k = rigid_curve(q, q0, rigid_[c.master].radius, 0.5 * (length[0] + length[1]), hessians);
         lc->slave_xy = 3, lc->slave_nodes = 5;
         break;
       }
@@ -122,7 +113,10 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       if (params_.deformable_contact == DeformableContact::Mortar) {
         // Mortar: seven master nodes around `segment`, the slave nodes point-2 .. point+2.
         for (int j = -3; j <= 3; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
-        const MortarSupport support = add_slave_cell();
+        MortarSupport support;
+        add_slave_window(support.length);
+        support.order = bodies_[c.body].mesh.order;
+        support.vertex = support.order == 1 || c.point % 2 == 0;
         lc->k = mortar_node(q, q0, support, hessians, &lc->beyond);
         lc->slave_xy = 14, lc->slave_nodes = 5;
         break;

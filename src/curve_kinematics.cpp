@@ -387,9 +387,53 @@ PairKinematics rigid_curve(const double q[13], const double q0[13], double rA, d
     half_minimum(P, s, centre, w, &ts, &ps);
     if (ps < psi) seg = s, t = ts, psi = ps;
   }
+  if (t != 0.5 && !hessians) {
+    // Inside the cell, first derivatives in closed form (the residual's; most
+    // candidates carry no force). With r = c - x(t), L = |r|, e = r / L,
+    // a = x', b = x'', u = (c - c0) - sum_i N_i (m_i - m0_i):
+    //   dg = e . (dc - sum_i N_i dm_i)                        (envelope: psi_t = 0)
+    //   f = psi_t = -(r . a) / L + w (t - t_s),  f_t = (a . a - r . b) / L - (r . a)^2 / L^3 + w,
+    //   f_c = -a_perp / L,  f_m_i = N_i a_perp / L - N_i' e   (a_perp = a - (e . a) e),
+    //   ds = sigma_q dq + sigma_t dt*,  dt* = -f_q dq / f_t,  sigma = tau . u.
+    double N[4], dN[4], d2N[4], x[2] = {0, 0}, a[2] = {0, 0}, b[2] = {0, 0}, u[2], du_t[2] = {0, 0};
+    basis(t, N, dN, d2N);
+    for (int c = 0; c < 2; ++c) {
+      u[c] = q[c] - q0[c];
+      for (int i = 0; i < 4; ++i) {
+        const double Pc = q[3 + 2 * (seg + i) + c], dP = Pc - q0[3 + 2 * (seg + i) + c];
+        x[c] += N[i] * Pc, a[c] += dN[i] * Pc, b[c] += d2N[i] * Pc;
+        u[c] -= N[i] * dP, du_t[c] -= dN[i] * dP;
+      }
+    }
+    const double r[2] = {q[0] - x[0], q[1] - x[1]}, L = std::hypot(r[0], r[1]);
+    const double e[2] = {r[0] / L, r[1] / L}, ea = e[0] * a[0] + e[1] * a[1], ra = L * ea;
+    const double a_perp[2] = {a[0] - ea * e[0], a[1] - ea * e[1]};
+    const double la = std::hypot(a[0], a[1]), tau[2] = {a[0] / la, a[1] / la};
+    const double ut = u[0] * tau[0] + u[1] * tau[1], u_perp[2] = {u[0] - ut * tau[0], u[1] - ut * tau[1]};
+    const double dt = t - (seg == 0 ? 1.0 : 0.0);
+    const double f_t = (a[0] * a[0] + a[1] * a[1] - r[0] * b[0] - r[1] * b[1]) / L - ra * ra / (L * L * L) + w;
+    const double sigma_t = (du_t[0] * a[0] + du_t[1] * a[1] + u[0] * b[0] + u[1] * b[1]) / la -
+                           ut * (a[0] * b[0] + a[1] * b[1]) / (la * la);
+    k.gap = L + 0.5 * w * dt * dt - rA;
+    k.slip = ut - rA * (q[2] - q0[2]);
+    k.normal[0] = -e[0], k.normal[1] = -e[1];
+    for (int c = 0; c < 2; ++c) {
+      k.dgap[c] = e[c];
+      k.dslip[c] = tau[c] + sigma_t * (a_perp[c] / L) / f_t;
+      for (int i = 0; i < 4; ++i) {
+        const int j = 3 + 2 * (seg + i) + c;
+        const double f_m = N[i] * a_perp[c] / L - dN[i] * e[c];
+        k.dgap[j] = -N[i] * e[c];
+        k.dslip[j] = -N[i] * tau[c] + dN[i] * u_perp[c] / la - sigma_t * f_m / f_t;
+      }
+    }
+    k.dslip[2] = -rA;
+    return k;
+  }
   if (t != 0.5) {
-    // Inside the cell: psi(q, t) in forward mode over the segment's four
-    // nodes (variables 0..7), the centre (8, 9) and t (10).
+    // Inside the cell with second derivatives: psi(q, t) in forward mode
+    // over the segment's four nodes (variables 0..7), the centre (8, 9) and
+    // t (10).
     double Nb[4], dNb[4], d2Nb[4];
     basis(t, Nb, dNb, d2Nb);
     const double d3N[4] = {-3.0, 9.0, -9.0, 3.0};

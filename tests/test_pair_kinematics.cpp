@@ -729,6 +729,16 @@ TEST(RigidCurve, FiniteDifferences) {
     }
     EXPECT_EQ(k.dgap[2], 0.0);
     EXPECT_DOUBLE_EQ(k.dslip[2], -c.rA);
+    // Without Hessians: the same values and gradients (closed form against
+    // forward mode), no second derivatives.
+    const PairKinematics k1 = rigid_curve(c.q, c.q0, c.rA, c.rB, false);
+    EXPECT_NEAR(k1.gap, k.gap, 1e-15);
+    EXPECT_NEAR(k1.slip, k.slip, 1e-15);
+    for (int i = 0; i < 13; ++i) {
+      EXPECT_NEAR(k1.dgap[i], k.dgap[i], 1e-12) << "trial " << trial << " unknown " << i;
+      EXPECT_NEAR(k1.dslip[i], k.dslip[i], 1e-12) << "trial " << trial << " unknown " << i;
+    }
+    EXPECT_EQ(max_abs(k1.d2gap, 169) + max_abs(k1.d2slip, 169), 0.0);
   }
   std::printf("  rigid curve: max rel FD error dgap %.2e dslip %.2e d2gap %.2e d2slip %.2e\n", worst.dgap, worst.dslip,
               worst.d2gap, worst.d2slip);
