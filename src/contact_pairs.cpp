@@ -1,5 +1,5 @@
 // Contact pairs: the kinematics of every candidate type (the geometry
-// dispatch: walls, rigid-rigid, rigid-node (or rigid-curve), node-segment and mortar gaps,
+// dispatch: walls, rigid-rigid, rigid-node, node-segment and mortar gaps,
 // contact_law.hpp and the *_kinematics files for the formulas), their
 // contributions to the residual and the Newton matrix (NCP rows, contact
 // forces), and the contact forces of the current state for the observables.
@@ -33,17 +33,6 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       q[nq] = present ? ref + z[d] : 0.0;
       q0[nq] = present ? ref + z0[d] : 0.0;
       ++nq;
-    }
-  };
-  // Mortar and rigid-curve pairs: the slave's boundary nodes point-2 .. point+2, and the
-  // reference lengths of its sub-segments point-1 -> point and point -> point+1.
-  auto add_slave_window = [&](double length[2]) {
-    const DiskMesh &s = bodies_[c.body].mesh;
-    const int ns = static_cast<int>(s.boundary.size());
-    for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
-    for (int side = 0; side < 2; ++side) {
-      const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
-      length[side] = std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
     }
   };
   const double *w = z + WallOffset();
@@ -94,13 +83,6 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       break;
     case ContactType::RigidNode:
       add_rigid(rigid_[c.master]);
-      if (params_.rigid_contact == RigidContact::Curve) {  // the curve through the slave nodes point-2 .. point+2
-        double length[2];
-        add_slave_window(length);
-        lc->k = rigid_curve(q, q0, rigid_[c.master].radius, 0.5 * (length[0] + length[1]), hessians);
-        lc->slave_xy = 3, lc->slave_nodes = 5;
-        break;
-      }
       add_node(bodies_[c.body], bodies_[c.body].mesh.boundary[c.point]);
       lc->k = rigid_node(q, q0, rigid_[c.master].radius);
       lc->slave_xy = 3;
@@ -112,11 +94,17 @@ void CompactionProblem::ContactGeometry(const ContactCandidate &c, const double 
       // master curve on the two segments around it.
       if (params_.deformable_contact == DeformableContact::Mortar) {
         // Mortar: seven master nodes around `segment`, the slave nodes point-2 .. point+2.
+        const DiskMesh &s = bodies_[c.body].mesh;
+        const int ns = static_cast<int>(s.boundary.size());
         for (int j = -3; j <= 3; ++j) add_node(bodies_[c.master], m.boundary[(c.segment + j + nb) % nb]);
+        for (int j = -2; j <= 2; ++j) add_node(bodies_[c.body], s.boundary[(c.point + j + ns) % ns]);
         MortarSupport support;
-        add_slave_window(support.length);
-        support.order = bodies_[c.body].mesh.order;
-        support.vertex = support.order == 1 || c.point % 2 == 0;
+        support.order = s.order;
+        support.vertex = s.order == 1 || c.point % 2 == 0;
+        for (int side = 0; side < 2; ++side) {
+          const int a = s.boundary[(c.point + side - 1 + ns) % ns], b = s.boundary[(c.point + side) % ns];
+          support.length[side] = std::hypot(s.X[2 * b] - s.X[2 * a], s.X[2 * b + 1] - s.X[2 * a + 1]);
+        }
         lc->k = mortar_node(q, q0, support, hessians, &lc->beyond);
         lc->slave_xy = 14, lc->slave_nodes = 5;
         break;

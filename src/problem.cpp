@@ -42,8 +42,6 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   const char *const predictor_names[] = {"none", "secant", "tangent"};  // LoadPredictor order
   PetscInt predictor_choice = static_cast<PetscInt>(predictor);
   const char *const deformable_names[] = {"nts", "two_pass", "mortar"};  // DeformableContact order
-  PetscInt rigid_choice = static_cast<PetscInt>(rigid_contact);
-  const char *const rigid_names[] = {"node", "curve"};  // RigidContact order
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Material and contact solver", "deformix");
   PetscCall(PetscOptionsReal("-E", "Young's modulus of the deformable disks", "", young, &young, nullptr));
@@ -99,11 +97,6 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                               "two_pass (node-to-segment both ways), mortar (each slave node's gap averaged over its cell "
                               "of the slave boundary, so the master cannot enter between slave nodes)",
                               "", deformable_names, 3, deformable_names[deformable_choice], &deformable_choice, nullptr));
-  PetscCall(PetscOptionsEList("-contact_rigid",
-                              "rigid - deformable pairs: node (each boundary node of the deformable disk against the "
-                              "circle), curve (the circle against the smooth curve through the boundary nodes, over each "
-                              "node's cell)",
-                              "", rigid_names, 2, rigid_names[rigid_choice], &rigid_choice, nullptr));
   PetscCall(PetscOptionsReal("-repartition_tol",
                              "MPI: repartition (METIS) when the edge cut can shrink by this fraction or the load imbalance "
                              "exceeds 1 + this (< 0: keep the first partition)",
@@ -113,7 +106,6 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscOptionsEnd();
   ncp = ncp_choice == 0 ? NcpFunction::Min : NcpFunction::FischerBurmeister;
   deformable_contact = static_cast<DeformableContact>(deformable_choice);
-  rigid_contact = static_cast<RigidContact>(rigid_choice);
   predictor = static_cast<LoadPredictor>(predictor_choice);
   PetscCheck(young > 0.0, comm, PETSC_ERR_USER_INPUT, "-E %g: Young's modulus must be positive", young);
   PetscCheck(poisson > -1.0 && poisson < 0.5, comm, PETSC_ERR_USER_INPUT,

@@ -42,10 +42,8 @@ namespace {
 // n x n disks of diameter 1 on a unit square grid; pattern(i, j) says which are deformable.
 template <class Pattern>
 std::unique_ptr<CompactionProblem> Lattice(int n, double friction, Pattern deformable, bool mortar = false,
-                                           int triangles = 92, double prox_eta = -1.0,
-                                           RigidContact rigid = RigidContact::Node) {
+                                           int triangles = 92, double prox_eta = -1.0) {
   ProblemParameters p;
-  p.rigid_contact = rigid;
   p.friction = friction;
   if (prox_eta > 0.0) p.prox_eta = prox_eta;  // else the default
   p.deformable_contact = mortar ? DeformableContact::Mortar : DeformableContact::NodeToSegment;
@@ -221,12 +219,6 @@ TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
 
 TEST(Mixture, AnchoredJacobianMatchesFiniteDifferences) {
   CheckJacobian(Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; }), "anchored frictional checkerboard", 1.0);
-}
-
-// The checkerboard with the rigid disks against the deformable disks' smooth curves (-contact_rigid curve).
-TEST(Mixture, RigidCurveFrictionalJacobianMatchesFiniteDifferences) {
-  CheckJacobian(Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; }, false, 92, -1.0, RigidContact::Curve),
-                "frictional checkerboard, rigid - curve pairs");
 }
 
 // Four deformable disks in contact through the mortar gap (-contact_deformable mortar).

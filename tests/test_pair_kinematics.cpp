@@ -3,10 +3,7 @@
 // motions), invariance of the gap under rigid rotation, consistency between
 // the pair types and degenerate input; for the smooth master curve
 // (curve_node) also the continuity of gap, normal and slip across master
-// nodes, the straight-line and circle limits, and the "beyond" flag; for a
-// rigid disk against that curve (rigid_curve) smaller node-to-node bumps
-// than rigid_node's, continuity at the cells' ends and a bounded Hessian
-// where the boundary wraps around the disk.
+// nodes, the straight-line and circle limits, and the "beyond" flag.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -27,22 +24,19 @@ const double kPi = std::acos(-1.0);
 
 constexpr int kMax = PairKinematics::kMaxDofs;
 
-enum class Pair { RigidRigid, RigidNode, SegmentNode, CurveNode, RigidCurve };
+enum class Pair { RigidRigid, RigidNode, SegmentNode, CurveNode };
 
 struct Config {
   Pair type;
   double q[kMax] = {};
   double q0[kMax] = {};
   double rA = 0.0, rB = 0.0;
-  int ndof() const {
-    return type == Pair::RigidNode ? 5 : type == Pair::CurveNode ? 12 : type == Pair::RigidCurve ? 13 : 6;
-  }
+  int ndof() const { return type == Pair::RigidNode ? 5 : type == Pair::CurveNode ? 12 : 6; }
   PairKinematics eval(const double *x) const {
     switch (type) {
       case Pair::RigidRigid: return rigid_rigid(x, q0, rA, rB);
       case Pair::RigidNode: return rigid_node(x, q0, rA);
       case Pair::CurveNode: return curve_node(x, q0);
-      case Pair::RigidCurve: return rigid_curve(x, q0, rA, rB);  // rB: the node spacing
       default: return segment_node(x, q0);
     }
   }
@@ -678,172 +672,6 @@ TEST(CurveNode, DegenerateInput) {
   EXPECT_EQ(k.normal[1], 0.0);
   EXPECT_NEAR(k.gap, 0.5, 1e-15);
   EXPECT_EQ(max_abs(k.dgap, 12), 0.0);
-}
-
-namespace {
-
-// A rigid disk of radius rA whose centre lies off + rA outside the unit
-// circle at angle pi/2 + at h; the five nodes of a deformable boundary on
-// the unit circle (counter-clockwise) around pi/2, spacing h, jittered.
-Config rigid_curve_config(double at, double off, std::mt19937 &rng, double h = 0.2, double jitter = 0.01) {
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
-  Config c;
-  c.type = Pair::RigidCurve;
-  c.rA = 0.5 + 0.2 * U(rng);
-  c.rB = h;
-  for (int j = 0; j < 5; ++j) {
-    const double th = 0.5 * kPi + (j - 2) * h, r = 1.0 + jitter * U(rng);
-    c.q[3 + 2 * j] = r * std::cos(th), c.q[4 + 2 * j] = r * std::sin(th);
-  }
-  const double th = 0.5 * kPi + at * h, d = 1.0 + off + c.rA;
-  c.q[0] = d * std::cos(th), c.q[1] = d * std::sin(th), c.q[2] = U(rng);
-  for (int i = 0; i < 13; ++i) c.q0[i] = c.q[i] + 0.05 * U(rng);
-  return c;
-}
-
-}  // namespace
-
-TEST(RigidCurve, FiniteDifferences) {
-  // The closest point inside node m2's cell (|at| < 1/2) and beyond it (the
-  // cell's end), the disk apart (up to 0.07) or overlapping (down to -0.01).
-  std::mt19937 rng(111);
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
-  FdErrors worst;
-  for (int trial = 0; trial < 60; ++trial) {
-    const double at = trial % 2 == 0 ? 0.45 * U(rng) : (0.6 + 0.6 * std::fabs(U(rng))) * (U(rng) < 0 ? -1 : 1);
-    const Config c = rigid_curve_config(at, 0.03 + 0.04 * U(rng), rng);
-    const PairKinematics k = c.eval();
-    ASSERT_EQ(k.ndof, 13);
-    const FdErrors e = fd_errors(c);
-    EXPECT_LT(e.dgap, 1e-6) << "trial " << trial;
-    EXPECT_LT(e.dslip, 1e-6) << "trial " << trial;
-    EXPECT_LT(e.d2gap, 1e-6) << "trial " << trial;
-    EXPECT_LT(e.d2slip, 1e-6) << "trial " << trial;
-    worst.dgap = std::max(worst.dgap, e.dgap), worst.dslip = std::max(worst.dslip, e.dslip);
-    worst.d2gap = std::max(worst.d2gap, e.d2gap), worst.d2slip = std::max(worst.d2slip, e.d2slip);
-    // Force balance: the disk's translation takes minus the sum over the nodes.
-    for (int cc = 0; cc < 2; ++cc) {
-      double nodes = 0.0;
-      for (int j = 0; j < 5; ++j) nodes += k.dgap[3 + 2 * j + cc];
-      EXPECT_NEAR(k.dgap[cc], -nodes, 1e-12);
-    }
-    EXPECT_EQ(k.dgap[2], 0.0);
-    EXPECT_DOUBLE_EQ(k.dslip[2], -c.rA);
-    // Without Hessians: the same values and gradients (closed form against
-    // forward mode), no second derivatives.
-    const PairKinematics k1 = rigid_curve(c.q, c.q0, c.rA, c.rB, false);
-    EXPECT_NEAR(k1.gap, k.gap, 1e-15);
-    EXPECT_NEAR(k1.slip, k.slip, 1e-15);
-    for (int i = 0; i < 13; ++i) {
-      EXPECT_NEAR(k1.dgap[i], k.dgap[i], 1e-12) << "trial " << trial << " unknown " << i;
-      EXPECT_NEAR(k1.dslip[i], k.dslip[i], 1e-12) << "trial " << trial << " unknown " << i;
-    }
-    EXPECT_EQ(max_abs(k1.d2gap, 169) + max_abs(k1.d2slip, 169), 0.0);
-  }
-  std::printf("  rigid curve: max rel FD error dgap %.2e dslip %.2e d2gap %.2e d2slip %.2e\n", worst.dgap, worst.dslip,
-              worst.d2gap, worst.d2slip);
-}
-
-TEST(RigidCurve, SmallerBumpsThanRigidNode) {
-  // A disk of radius 0.5 held at a fixed distance above a straight boundary
-  // (nodes spaced 0.05, counter-clockwise around the body below: along -x)
-  // while it slides over two node spacings. rigid_node's smallest gap rides
-  // over bumps of about (h/2)^2 / (2 rA) = 6.1e-4; rigid_curve's, the
-  // smallest over the cells, of beta / (1 + beta) of that, and never below
-  // the distance (the pull only adds to it).
-  const double h = 0.05, rA = 0.5, dist = 0.01;
-  double node_lo = 1e9, node_hi = -1e9, curve_lo = 1e9, curve_hi = -1e9;
-  for (int s = 0; s <= 80; ++s) {
-    const double xc = 2.0 * h * s / 80.0;
-    double curve = 1e9, node = 1e9;
-    for (int k = 2; k < 38; ++k) {
-      double q[13] = {xc, dist + rA, 0.0}, q0[13];
-      for (int j = 0; j < 5; ++j) q[3 + 2 * j] = h * (22 - k - j), q[4 + 2 * j] = 0.0;  // nodes k-2..k+2 along -x
-      std::copy(q, q + 13, q0);
-      curve = std::min(curve, rigid_curve(q, q0, rA, h, false).gap);
-      const double qn[5] = {xc, dist + rA, 0.0, h * (k - 20), 0.0};
-      node = std::min(node, rigid_node(qn, qn, rA).gap);
-    }
-    EXPECT_GE(curve, dist - 1e-14) << "xc " << xc;
-    node_lo = std::min(node_lo, node), node_hi = std::max(node_hi, node);
-    curve_lo = std::min(curve_lo, curve), curve_hi = std::max(curve_hi, curve);
-  }
-  const double node_bump = node_hi - node_lo, curve_bump = curve_hi - curve_lo;
-  EXPECT_NEAR(node_bump, std::hypot(h / 2, rA + dist) - rA - dist, 1e-12);  // ~ (h/2)^2 / (2 (rA + dist))
-  const double beta = kRigidCurvePull;
-  EXPECT_NEAR(curve_bump / node_bump, beta / (1 + beta), 0.03);
-  std::printf("  disk sliding over a straight boundary: bumps of the smallest gap %.3e (rigid_node) and %.3e (rigid_curve)\n",
-              node_bump, curve_bump);
-}
-
-TEST(RigidCurve, ConformingContactHasABoundedHessian) {
-  // The boundary wrapped around the disk at distance 0.01 (nodes on the
-  // circle of radius rA + 0.01 about its centre, counter-clockwise about the
-  // body outside it, i.e. clockwise about the disk): |c - x(t)| is nearly
-  // constant over the cell; the pull keeps the gap's Hessian bounded, and
-  // the gap within w / 8 of the distance.
-  const double rA = 0.5, h = 0.05;
-  for (double at : {0.0, 0.2, -0.35}) {
-    double q[13] = {0.01, -0.02, 0.0}, q0[13];
-    for (int j = 0; j < 5; ++j) {
-      const double th = 0.5 * kPi - (j - 2 + at) * h / (rA + 0.01);
-      q[3 + 2 * j] = q[0] + (rA + 0.01) * std::cos(th), q[4 + 2 * j] = q[1] + (rA + 0.01) * std::sin(th);
-    }
-    std::copy(q, q + 13, q0);
-    const PairKinematics k = rigid_curve(q, q0, rA, h);
-    EXPECT_GE(k.gap, 0.01 - 1e-6);
-    EXPECT_LE(k.gap, 0.01 + kRigidCurvePull * h * h / rA / 8 + 1e-6);
-    // Without the pull psi_tt would be the spline's deviation from the
-    // circle, O(h^4), and the Hessian some 1e5 times larger.
-    EXPECT_LT(max_abs(k.d2gap, 169), 500.0 / rA) << "at " << at;
-    std::printf("  conforming contact at %+.2f h: largest gap Hessian entry %.1f\n", at, max_abs(k.d2gap, 169));
-  }
-}
-
-TEST(RigidCurve, ContinuousAtTheEndOfTheCell) {
-  // On a curved boundary, a disk moved across the end of node m2's cell:
-  // gap, gradient and slip of the cell's constraint continuous there.
-  std::mt19937 rng(112);
-  for (int trial = 0; trial < 10; ++trial) {
-    Config c = rigid_curve_config(0.0, 0.02, rng);
-    // Find the angle at which the closest point reaches the cell's end by
-    // bisection on the jump of the Hessian (zero inside the end's branch for
-    // the node coordinates of m0 and m4).
-    const double d = std::hypot(c.q[0], c.q[1]);
-    auto at = [&](double a) {
-      Config x = c;
-      x.q[0] = d * std::cos(0.5 * kPi + a * 0.2), x.q[1] = d * std::sin(0.5 * kPi + a * 0.2);
-      return x.eval(x.q);
-    };
-    // Beyond the cell the gap is the distance to the fixed end point x(1/2)
-    // of segment m2 -> m3 (Catmull-Rom weights -1/16, 9/16, 9/16, -1/16 on
-    // m1..m4), less rA; inside it is smaller.
-    // (plus the pull at the cell's end, w / 8).
-    auto end_gap = [&](const PairKinematics &k, double a) {
-      const double w[4] = {-1.0 / 16, 9.0 / 16, 9.0 / 16, -1.0 / 16};
-      double x[2] = {0, 0};
-      for (int i = 0; i < 4; ++i)
-        for (int cc = 0; cc < 2; ++cc) x[cc] += w[i] * c.q[3 + 2 * (1 + i) + cc];
-      const double cx = d * std::cos(0.5 * kPi + a * 0.2), cy = d * std::sin(0.5 * kPi + a * 0.2);
-      return std::hypot(cx - x[0], cy - x[1]) - c.rA + kRigidCurvePull * c.rB * c.rB / c.rA / 8 - k.gap;
-    };
-    // The pull holds the minimum inside the cell beyond a = 1/2: find an
-    // angle past the hand-over.
-    double lo = 0.2, hi = 0.8;
-    while (hi < 2.0 && std::fabs(end_gap(at(hi), hi)) > 1e-14) hi += 0.2;
-    EXPECT_GT(end_gap(at(lo), lo), 1e-8);
-    EXPECT_NEAR(end_gap(at(hi), hi), 0.0, 1e-14);
-    for (int it = 0; it < 60; ++it) {
-      const double m = 0.5 * (lo + hi);
-      (end_gap(at(m), m) < 1e-15 ? hi : lo) = m;
-    }
-    const PairKinematics a = at(lo - 1e-7), b = at(hi + 1e-7);
-    EXPECT_NEAR(a.gap, b.gap, 1e-6);
-    EXPECT_NEAR(a.slip, b.slip, 1e-6);
-    double jump = 0.0;
-    for (int i = 0; i < 13; ++i) jump = std::max(jump, std::fabs(a.dgap[i] - b.dgap[i]));
-    EXPECT_LT(jump, 1e-5) << "trial " << trial;
-  }
 }
 
 int main(int argc, char **argv) {

@@ -99,25 +99,6 @@ PairKinematics segment_node(const double q[6], const double q0[6]);
 // Degenerate input (collapsed tangent, or no closest point: a node far on
 // the concave side) gives a zero normal and zero derivatives.
 PairKinematics curve_node(const double q[12], const double q0[12], bool hessians = true, int *beyond = nullptr);
-// A rigid disk (centre, angle, radius rA) against the smooth curve of a
-// deformable boundary over the cell of boundary node m2 (half of each of
-// the segments m1 -> m2 and m2 -> m3): q = (xA, yA, thA, m0..m4), 13
-// unknowns,
-//   g = min over the cell of |c - x(t)| - rA + (w / 2) (t - t_node)^2,
-//   w = beta h^2 / rA (h = `spacing`, the reference node spacing),
-//   s = tau . [(c - c0) - sum_i N_i(t*) (m_i - m0_i)] - rA (thA - thA0)
-// (t* the minimizer; the slip of the disk's contact point relative to the
-// curve's material point, the same as rigid_node's for the same motion),
-// normal from the disk towards the curve point. A rigid_node pair checks
-// the boundary nodes only, so a disk touching a convex boundary between two
-// nodes sinks in by up to (h/2)^2 / (2 R_eff): as it slides, its contact
-// rides over bumps of that height, node to node. Over the cells of a
-// boundary the smallest g has bumps of beta / (1 + beta) of those; the pull
-// towards the node keeps the minimizer determined where the boundary wraps
-// around the disk, and neighbouring cells' constraints apart (with beta <= 1
-// the 20-disk scene cycles between two states; src/curve_kinematics.cpp).
-constexpr double kRigidCurvePull = 2.0;  // beta
-PairKinematics rigid_curve(const double q[13], const double q0[13], double rA, double spacing, bool hessians = true);
 
 // Mortar (weighted) gap and slip of slave boundary node j against the smooth
 // master curve (src/mortar_kinematics.cpp):

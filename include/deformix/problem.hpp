@@ -97,12 +97,6 @@ namespace deformix {
 //                  boundary (mortar_node).
 enum class DeformableContact : int { NodeToSegment = 0, TwoPass = 1, Mortar = 2 };
 
-// Contact law of a rigid disk against a deformable disk (-contact_rigid):
-//   Node    each boundary node of the deformable disk against the circle (rigid_node);
-//   Curve   the circle against the smooth curve through the boundary nodes,
-//           its distance over each node's cell (rigid_curve).
-enum class RigidContact : int { Node = 0, Curve = 1 };
-
 // Initial guess of a load step (BeginLoadStep): the last converged state,
 // its secant extrapolation along the load path, or its tangent dz/dP.
 enum class LoadPredictor : int { None = 0, Secant = 1, Tangent = 2 };
@@ -123,7 +117,6 @@ struct ProblemParameters {
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   DeformableContact deformable_contact = DeformableContact::NodeToSegment;  // law of deformable-deformable pairs
-  RigidContact rigid_contact = RigidContact::Node;  // law of rigid-deformable pairs
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
   LoadPredictor predictor = LoadPredictor::Secant;  // initial guess of a load step (-predictor)
   double repartition_tol = 0.1;  // repartition when the new edge cut is smaller by this fraction or the imbalance exceeds 1 + this (< 0: never)
