@@ -408,7 +408,9 @@ PetscErrorCode Run(MPI_Comm comm) {
       PetscCall(SolveLevel(problem, load.level, P_settle, &again));
       PetscCheck(again.converged, comm, PETSC_ERR_NOT_CONVERGED,
                  "P/E = %g: the frictionless settled state did not converge once friction was switched on (%s); "
-                 "try -settle_frictionless false", P_settle / params.young, SNESConvergedReasons[again.reason]);
+                 "on several ranks run it again (the settling takes another path each time), or try "
+                 "-settle_frictionless false (much slower on large packings)",
+                 P_settle / params.young, SNESConvergedReasons[again.reason]);
       LevelReport rest;
       PetscCall(AdvanceToPressure(problem, load, P, &step, &rest));
       rep.newton_its += again.newton_its + rest.newton_its;
