@@ -682,12 +682,15 @@ class AnchoredContinuation {
   bool backtrack_ = false;                  // DetectCycle found an active-set cycle: Backtrack this step
   double fnorm0_ = 0.0;
   bool stalled_ = false;  // the last inner solve ended at ptc_stall_its with |G| decreased (Converged)
+  Vec best_ = nullptr;      // the inner solve's iterate of least |G| so far (Converged)
+  double best_norm_ = 0.0;
+  bool take_best_ = false;  // the inner solve ends at best_ rather than at its last iterate
 };
 
 PetscErrorCode AnchoredContinuation::Destroy() {
   PetscFunctionBeginUser;
   PetscCall(SNESDestroy(&snes_));
-  PetscCall(DestroyAll({&work_, &step_}));
+  PetscCall(DestroyAll({&work_, &step_, &best_}));
   PetscFunctionReturn(0);
 }
 
@@ -756,7 +759,14 @@ PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal
   PetscCall(a->p_.ChangedStateMargin(a->checked_, &changed_margin));
   a->checked_ = now;
   *reason = SNES_CONVERGED_ITERATING;
-  if (it == 0) a->fnorm0_ = fnorm;
+  if (it == 0) a->fnorm0_ = fnorm, a->best_norm_ = fnorm, a->take_best_ = false;
+  if (it > 0 && fnorm < a->best_norm_) {  // kept for the stall rule below
+    Vec x;
+    PetscCall(SNESGetSolution(snes, &x));
+    if (!a->best_) PetscCall(VecDuplicate(x, &a->best_));
+    PetscCall(VecCopy(x, a->best_));
+    a->best_norm_ = fnorm;
+  }
   // Inexact pseudo-time steps: the path in pseudo-time is not the answer,
   // only its end point is, so inside pseudo-transient continuation an inner
   // solve ends once it has reduced |G| by kInnerForcing (inexact Newton on
@@ -799,12 +809,16 @@ PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal
     // as many; a whole curve, one sample of a path that differs from run to
     // run on 2 ranks, does not show it ("Measured: the stall limit at 1500
     // disks").
-    if (fnorm >= a->fnorm0_) {
-      *reason = SNES_DIVERGED_DTOL;
-    } else {
-      *reason = SNES_CONVERGED_ITS;
-      a->stalled_ = true;
-    }
+    // Semismooth Newton is not monotone: an inner solve whose last iterate
+    // is above |G| at the anchor may have passed below it on the way (a
+    // switch of many contact states raising |G| for a step). Then its best
+    // iterate is the inexact pseudo-time step, as for a solve that ended
+    // below the anchor's |G|, instead of a retry with rho_a four times
+    // larger (docs/level-solver-measurements.md, "Measured: the best
+    // iterate of a stalled inner solve").
+    a->stalled_ = a->best_norm_ < a->fnorm0_;
+    a->take_best_ = a->stalled_ && fnorm >= a->fnorm0_;
+    *reason = a->stalled_ ? SNES_CONVERGED_ITS : SNES_DIVERGED_DTOL;
   }
   PetscFunctionReturn(0);
 }
@@ -976,6 +990,10 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     history_.clear();
     stalled_ = false;
     PetscCall(SNESSolve(snes_, nullptr, z_));
+    if (take_best_) {  // and the problem's contact data those of the best iterate
+      PetscCall(VecCopy(best_, z_));
+      PetscCall(p_.Residual(z_, F_));
+    }
     const double rho_solved = p_.AnchorWeight();
     ++report->inner_solves;
     PetscInt its;

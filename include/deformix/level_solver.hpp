@@ -83,9 +83,10 @@
 //   two or three iterations ago (an active-set cycle, typically stick <->
 //   slip on the edge of the cone) is backtracked
 //   until |R| decreases; an inner solve short of its 100-fold drop after
-//   -ptc_stall_its (4) iterations is cut short: its iterate is an inexact
-//   pseudo-time step if its residual decreased, else it is retried with
-//   more damping. In the end game rho_a is held at least at its value when
+//   -ptc_stall_its (4) iterations is cut short: its last iterate is an
+//   inexact pseudo-time step if its residual decreased, else its iterate of
+//   least residual if that one is below the anchor's, else it is retried
+//   with more damping. In the end game rho_a is held at least at its value when
 //   the end game began. A sub-step whose force residual grows beyond 100
 //   times the larger of its start value and P <d> has failed
 //   (kDivergedForce): the controller cuts it.
