@@ -760,7 +760,7 @@ PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal
   a->checked_ = now;
   *reason = SNES_CONVERGED_ITERATING;
   if (it == 0) a->fnorm0_ = fnorm, a->best_norm_ = fnorm, a->take_best_ = false;
-  if (it > 0 && fnorm < a->best_norm_) {  // kept for the stall rule below
+  if (it > 0 && fnorm < a->best_norm_ && a->p_.AnchorWeight() > 0.0) {  // for the stall rule below
     Vec x;
     PetscCall(SNESGetSolution(snes, &x));
     if (!a->best_) PetscCall(VecDuplicate(x, &a->best_));
