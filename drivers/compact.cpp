@@ -26,7 +26,8 @@ static const char help[] =
     "Writes <output_dir>/curve.csv (one row per level), <output_dir>/levels.h5 (the state of every\n"
     "level, with the contact network) and levels.xdmf beside it (open it in ParaView: a time series\n"
     "over the levels), <output_dir>/packing.csv (the initial packing) and <output_dir>/checkpoint.h5 (after\n"
-    "every level: what -restart needs to continue the run exactly where it stopped).\n\n"
+    "every level, and after the frictionless settling of the first: what -restart needs to continue the run\n"
+    "exactly where it stopped).\n\n"
     "Examples:\n"
     "  build/bin/compact -options_file petsc-options/default.opts     (20 disks, a few seconds)\n"
     "  build/bin/compact -n_particles 64 -kappa 0.5 -friction 0.2 -pressures 1e-4,1e-3 -output_dir out/c64\n"
@@ -148,6 +149,55 @@ const std::vector<std::string> kCurveColumns = {
     "force_residual_over_Pd", "relaxed_substeps", "gauge_torque_over_Pd2", "factorizations",
     "body_force_over_Pd", "body_torque_over_Pd2"};
 
+// The counts of a solve added to those of its level.
+void AddCounts(const SolveReport &s, LevelReport *rep) {
+  rep->newton_its += s.newton_its;
+  rep->factorizations += s.factorizations;
+  rep->inner_solves += s.inner_solves;
+  rep->layouts += s.layouts;
+}
+
+void AddCounts(const LevelReport &r, LevelReport *rep) {
+  rep->newton_its += r.newton_its;
+  rep->factorizations += r.factorizations;
+  rep->inner_solves += r.inner_solves;
+  rep->layouts += r.layouts;
+  rep->substeps += r.substeps;
+  rep->cuts += r.cuts;
+  rep->relaxed_substeps += r.relaxed_substeps;
+}
+
+// The frictionless settling of the first level in a checkpoint (compact
+// writes one after it, so that -restart takes up the frictional solve): its
+// pressure and the counts that the first level's curve row includes.
+std::vector<SceneValue> SettlingValues(double P_settle_over_E, const LevelReport &r) {
+  return {{"settled_P_over_E", P_settle_over_E},
+          {"settled_newton_its", double(r.newton_its)},
+          {"settled_factorizations", double(r.factorizations)},
+          {"settled_inner_solves", double(r.inner_solves)},
+          {"settled_layouts", double(r.layouts)},
+          {"settled_substeps", double(r.substeps)},
+          {"settled_cuts", double(r.cuts)},
+          {"settled_relaxed_substeps", double(r.relaxed_substeps)},
+          {"settled_seconds", r.seconds}};
+}
+
+LevelReport SettlingReport(const Checkpoint &c) {
+  LevelReport r;
+  r.newton_its = static_cast<PetscInt>(c.Value("settled_newton_its"));
+  r.factorizations = static_cast<PetscInt>(c.Value("settled_factorizations"));
+  r.inner_solves = static_cast<int>(c.Value("settled_inner_solves"));
+  r.layouts = static_cast<int>(c.Value("settled_layouts"));
+  r.substeps = static_cast<int>(c.Value("settled_substeps"));
+  r.cuts = static_cast<int>(c.Value("settled_cuts"));
+  r.relaxed_substeps = static_cast<int>(c.Value("settled_relaxed_substeps"));
+  r.seconds = c.Value("settled_seconds");
+  return r;
+}
+
+// The pressure of the frictionless settling for a first level P_1 (P/E).
+double SettlingPressure(double P1_over_E) { return std::min(P1_over_E, 1e-4); }
+
 // A settling load step (the rigid pre-settling, the frictionless settling
 // of the mixture): with -level_solver auto it is tried in one load step,
 // and where that fails, solved by hybrid from the state before it. auto's
@@ -188,10 +238,7 @@ PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &l
   hybrid.level.strategy = LevelStrategy::Hybrid;
   *step = step_before;
   PetscCall(AdvanceToPressure(problem, hybrid, pressure, step, rep));
-  rep->newton_its += first.newton_its;
-  rep->factorizations += first.factorizations;
-  rep->inner_solves += first.inner_solves;
-  rep->cuts += first.cuts;
+  AddCounts(first, rep);
   PetscFunctionReturn(0);
 }
 
@@ -290,12 +337,28 @@ PetscErrorCode Run(MPI_Comm comm) {
                        {"contact_deformable", double(params.deformable_contact)},
                        {"constrain_rotation", params.constrain_rotation ? 1.0 : 0.0}};
   const bool restarting = !opts.restart.empty();
+  const bool settle_frictionless = opts.settle_frictionless && params.friction > 0.0;
   Checkpoint restart;
   if (restarting) {
     PetscCall(LoadRestart(comm, opts.restart, "compact", scene, kCurveColumns, opts.pressures, &restart));
     PetscCheck(restart.packing.size() == opts.n_particles, comm, PETSC_ERR_FILE_UNEXPECTED,
                "-restart %s holds %d disks for -n_particles %" PetscInt_FMT, opts.restart.c_str(),
                restart.packing.size(), opts.n_particles);
+  }
+  // A checkpoint without a level holds the frictionless settling of the first level.
+  const bool restart_settled = restarting && restart.levels.empty();
+  if (restart_settled) {
+    const double settled = restart.Value("settled_P_over_E");
+    PetscCheck(settled > 0.0, comm, PETSC_ERR_FILE_UNEXPECTED,
+               "-restart %s holds neither a level nor the frictionless settling of the first one", opts.restart.c_str());
+    PetscCheck(settle_frictionless, comm, PETSC_ERR_USER_INPUT,
+               "-restart %s holds the frictionless settling of the first level, which -settle_frictionless false "
+               "skips: continue it with -settle_frictionless true",
+               opts.restart.c_str());
+    PetscCheck(SettlingPressure(opts.pressures[0]) == settled, comm, PETSC_ERR_USER_INPUT,
+               "-restart %s holds the frictionless settling at P/E = %g, but the first level of -pressures (%g) "
+               "settles at P/E = %g: give the first level of the run it continues",
+               opts.restart.c_str(), settled, opts.pressures[0], SettlingPressure(opts.pressures[0]));
   }
   PetscCall(PrepareOutputDirectory(comm, opts.output_dir));
   PetscCall(PetscLogStageRegister("Packing", &stage_pack));
@@ -375,7 +438,12 @@ PetscErrorCode Run(MPI_Comm comm) {
                         opts.packing.empty() ? "seed " : "packing ",
                         opts.packing.empty() ? std::to_string(opts.seed).c_str() : opts.packing.c_str(),
                         phi0, z0_no_rattlers, z0_mirror, 100.0 * rattlers0));
-  if (restarting)
+  if (restart_settled)
+    PetscCall(PetscPrintf(comm,
+                          "  restart from %s: the frictionless settling of the first level done (P/E = %g), "
+                          "continuing with its frictional solve\n",
+                          opts.restart.c_str(), restart.Value("settled_P_over_E")));
+  else if (restarting)
     PetscCall(PetscPrintf(comm, "  restart from %s: %zu level(s) done (last P/E = %g), continuing with P/E = %g\n",
                           opts.restart.c_str(), restart.levels.size(), restart.levels.back(),
                           opts.pressures[restart.levels.size()]));
@@ -389,6 +457,21 @@ PetscErrorCode Run(MPI_Comm comm) {
   double step = restarting ? restart.load_step : -1.0;
   double prev_phi = restarting ? restart.Value("previous_phi") : phi0;
   double prev_P = restarting ? restart.Value("previous_pressure") : 0.0;
+  // A checkpoint of this run, which the outputs complete with the levels done
+  // and the state: the last level's phi and P for the next bulk modulus.
+  const auto RunCheckpoint = [&](double last_phi, double last_P) {
+    Checkpoint c;
+    c.driver = "compact";
+    c.scene = scene;
+    c.packing = packing;
+    c.values = {{"phi_0", phi0},
+                {"Z_0_no_rattlers", z0_no_rattlers},
+                {"Z_0_mirror", z0_mirror},
+                {"rattler_fraction_0", rattlers0},
+                {"previous_phi", last_phi},
+                {"previous_pressure", last_P}};
+    return c;
+  };
   for (size_t level = outputs.LevelsDone(); level < opts.pressures.size(); ++level) {
     const double P_over_E = opts.pressures[level], P = P_over_E * params.young;
     LevelReport rep;
@@ -399,14 +482,35 @@ PetscErrorCode Run(MPI_Comm comm) {
     // friction: a large first level is not compacted frictionless.
     PetscLogDouble t_start, t_end;
     PetscCall(PetscTime(&t_start));
-    if (level == 0 && opts.settle_frictionless && params.friction > 0.0) {
-      const double P_settle = std::min(P, 1e-4 * params.young);
-      problem.SetFrictionActive(false);
-      PetscCall(Settle(problem, load, P_settle, &step, &rep));
+    if (level == 0 && settle_frictionless) {
+      const double P_settle = SettlingPressure(P_over_E) * params.young;
+      if (restart_settled) {
+        rep = SettlingReport(restart);
+      } else {
+        problem.SetFrictionActive(false);
+        PetscCall(Settle(problem, load, P_settle, &step, &rep));
+        PetscLogDouble t_settled;
+        PetscCall(PetscTime(&t_settled));
+        rep.seconds = t_settled - t_start;
+        // On large packings the settling is most of the first level (about
+        // 800 of 1000 Newton iterations at 1500 disks): -restart takes up
+        // the frictional solve from here.
+        if (opts.checkpoint) {
+          Checkpoint c = RunCheckpoint(phi0, 0.0);
+          const std::vector<SceneValue> settling = SettlingValues(P_settle / params.young, rep);
+          c.values.insert(c.values.end(), settling.begin(), settling.end());
+          c.columns = kCurveColumns;
+          c.load_step = step;
+          c.state = problem.TakeSnapshot();
+          PetscCall(WriteCheckpoint(comm, opts.output_dir + "/checkpoint.h5", c));
+        }
+      }
       const CompactionProblem::Snapshot settled = problem.TakeSnapshot();
       problem.SetFrictionActive(true);
       SolveReport again;
       PetscCall(SolveLevel(problem, load.level, P_settle, &again));
+      LevelReport friction;  // the frictional solve of the settled state
+      AddCounts(again, &friction);
       // The most fragile solve of a curve: on the 1500-disk paper scene its
       // inner solves fail up to five times in a row, and on one packing
       // hybrid gave up where anchored alone, from the settled state, passed
@@ -421,34 +525,29 @@ PetscErrorCode Run(MPI_Comm comm) {
         PetscCall(problem.RestoreSnapshot(settled));
         LevelSolverParameters anchored = load.level;
         anchored.strategy = LevelStrategy::Anchored;
-        const SolveReport failed = again;
         PetscCall(SolveLevel(problem, anchored, P_settle, &again));
-        again.newton_its += failed.newton_its;
-        again.factorizations += failed.factorizations;
-        again.inner_solves += failed.inner_solves;
-        again.layouts += failed.layouts;
+        AddCounts(again, &friction);
       }
       PetscCheck(again.converged, comm, PETSC_ERR_NOT_CONVERGED,
                  "P/E = %g: the frictionless settled state did not converge once friction was switched on (%s); "
-                 "on several ranks run it again (the settling takes another path each time), or try "
-                 "-settle_frictionless false (much slower on large packings)",
-                 P_settle / params.young, SNESConvergedReasons[again.reason]);
+                 "%s%s%s, or try -settle_frictionless false (much slower on large packings)",
+                 P_settle / params.young, SNESConvergedReasons[again.reason],
+                 opts.checkpoint ? "take it up from the settled state with other solver options by -restart " : "",
+                 opts.checkpoint ? (opts.output_dir + "/checkpoint.h5").c_str() : "",
+                 opts.checkpoint ? ", or run it on another number of ranks (another path)"
+                                 : "on several ranks run it again (the settling takes another path each time)");
       LevelReport rest;
       PetscCall(AdvanceToPressure(problem, load, P, &step, &rest));
-      rep.newton_its += again.newton_its + rest.newton_its;
-      rep.factorizations += again.factorizations + rest.factorizations;
-      rep.inner_solves += again.inner_solves + rest.inner_solves;
-      rep.layouts += again.layouts + rest.layouts;
-      rep.substeps += rest.substeps;
-      rep.cuts += rest.cuts;
+      AddCounts(friction, &rep);
+      AddCounts(rest, &rep);
       rep.force_residual = rest.substeps > 0 ? rest.force_residual : again.force_residual;
-      rep.relaxed_substeps += rest.substeps > 0 ? rest.relaxed_substeps : again.relaxed;
+      if (rest.substeps == 0 && again.relaxed) ++rep.relaxed_substeps;
     } else {
       problem.SetFrictionActive(true);
       PetscCall(AdvanceToPressure(problem, load, P, &step, &rep));
     }
     PetscCall(PetscTime(&t_end));
-    rep.seconds = t_end - t_start;
+    rep.seconds = t_end - t_start + (level == 0 && restart_settled ? restart.Value("settled_seconds") : 0.0);
     PetscCall(PetscLogStagePop());
     const PackingObservables o = ComputeObservables(problem);
     const LayoutSizes sizes = problem.Sizes();
@@ -490,17 +589,7 @@ PetscErrorCode Run(MPI_Comm comm) {
         {"gauge_torque_over_Pd2", problem.Summary().max_gauge_torque / (P * d * d)},
         {"factorizations", double(rep.factorizations)}, {"body_force_over_Pd", balance.body_force / (P * d)},
         {"body_torque_over_Pd2", balance.body_torque / (P * d * d)}};
-    Checkpoint c;
-    c.driver = "compact";
-    c.scene = scene;
-    c.packing = packing;
-    c.values = {{"phi_0", phi0},
-                {"Z_0_no_rattlers", z0_no_rattlers},
-                {"Z_0_mirror", z0_mirror},
-                {"rattler_fraction_0", rattlers0},
-                {"previous_phi", prev_phi},
-                {"previous_pressure", prev_P}};
-    PetscCall(outputs.Level(level, opts.pressures, row, step, problem, c));
+    PetscCall(outputs.Level(level, opts.pressures, row, step, problem, RunCheckpoint(prev_phi, prev_P)));
     PetscCall(PetscLogStagePop());
   }
   PetscCall(PetscPrintf(comm, "  wrote %s: %s\n", opts.output_dir.c_str(), outputs.Written().c_str()));

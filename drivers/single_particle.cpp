@@ -100,6 +100,8 @@ PetscErrorCode Run(MPI_Comm comm) {
   Checkpoint restart;
   if (restarting)
     PetscCall(LoadRestart(comm, opts.restart, "single-particle", scene, kCurveColumns, opts.pressures, &restart));
+  PetscCheck(!restarting || !restart.levels.empty(), comm, PETSC_ERR_FILE_UNEXPECTED,
+             "-restart %s holds no level: single-particle writes its checkpoint after every level", opts.restart.c_str());
   PetscCall(PrepareOutputDirectory(comm, opts.output_dir));
   PetscCall(PetscLogStageRegister("Solve", &stage_solve));
   PetscCall(PetscLogStageRegister("Output", &stage_output));

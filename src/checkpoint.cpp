@@ -298,8 +298,7 @@ PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, Checkpoint
     const std::vector<double> rows = read_array<double>(file, "curve", c->columns.size());
     for (size_t i = 0; i < rows.size(); i += c->columns.size())
       c->rows.emplace_back(rows.begin() + i, rows.begin() + i + c->columns.size());
-    if (c->levels.empty() || c->rows.size() != c->levels.size())
-      throw H5Failure("it holds no level, or its curve rows do not match its levels");
+    if (c->rows.size() != c->levels.size()) throw H5Failure("its curve rows do not match its levels");
     const std::vector<double> disks = read_array<double>(file, "packing", 4);
     for (size_t i = 0; i < disks.size(); i += 4) {
       c->packing.x.push_back(disks[i]);

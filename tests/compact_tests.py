@@ -20,6 +20,15 @@ Cases
                     later levels of levels.h5; bad checkpoints and options that do
                     not fit the checkpoint are refused with a clear message and
                     leave the existing results byte-identical
+  restart-settled   the restart scene with rotation gauges: its frictional solve of the
+                    settled state made to fail (-level_attempt_its 1 -ptc_max_steps 1)
+                    is tried again from the settled state with anchored alone, then
+                    exits non-zero naming -restart and the checkpoint of the settled
+                    state it wrote; restarted from that checkpoint with the default
+                    solver, the run repeats the uninterrupted one bit for bit
+                    (curve.csv but its seconds, levels.h5); a first level that settles
+                    at another pressure and -settle_frictionless false are refused
+                    with a clear message, leaving the results byte-identical
   packing           -packing FILE: a 3 x 3 square lattice of equal rigid disks read from
                     a CSV file keeps phi = pi/4 with P d at every contact; bad files
                     (empty, missing or unknown column, text, radius <= 0, overlaps)
@@ -121,7 +130,6 @@ def h5_levels(path):
 
 
 def restart_case(driver, workdir, mpiexec):
-    import numpy as np
     levels = [1e-4, 1e-3, 3e-3]
     full, part = os.path.join(workdir, "full"), os.path.join(workdir, "part")
     for d in (full, part):
@@ -134,17 +142,9 @@ def restart_case(driver, workdir, mpiexec):
     shutil.copy(os.path.join(part, "checkpoint.h5"), two_levels)
     rc, text = compact(driver, part, levels, extra=["-restart", os.path.join(part, "checkpoint.h5")])
     check(rc == 0 and "restart from" in text, f"restart for the third level: exit code {rc}")
-    a, b = read_curve(full), read_curve(part)
-    check(len(a) == len(b) == 3, f"restarted curve has {len(b)} rows (3)")
-    for ra, rb in zip(a, b):
-        ra = {k: v for k, v in ra.items() if k != "seconds"}
-        rb = {k: v for k, v in rb.items() if k != "seconds"}
-        diff = [k for k in ra if ra[k] != rb.get(k)]
-        check(not diff, f"P/E = {ra['P_over_E']}: restarted row equals the uninterrupted one to all digits (differs in {diff})")
-    ha, hb = h5_levels(os.path.join(full, "levels.h5")), h5_levels(os.path.join(part, "levels.h5"))
-    check(sorted(ha) == sorted(hb), f"levels.h5 groups {sorted(hb)} == {sorted(ha)}")
-    same = all(k in hb[g] and np.array_equal(ha[g][k], hb[g][k]) for g in ha if g in hb for k in ha[g])
-    check(same, "levels.h5 of the restarted run equals the uninterrupted one's, every dataset bit for bit")
+    a = read_curve(full)
+    check(len(a) == 3, f"uninterrupted curve has {len(a)} rows (3)")
+    compare_runs(full, part)
 
     # On two ranks (METIS partition, distributed MUMPS): the same curve to solver tolerance.
     two = os.path.join(workdir, "two-ranks")
@@ -206,6 +206,65 @@ def restart_case(driver, workdir, mpiexec):
         # The scene options come first; a later repeat of an option wins.
         rc, text = compact(driver, part, pressures, extra=extra)
         check(rc != 0, f"{' '.join(extra[2:]) or extra[1]}: refused (exit code {rc})")
+        check(expect in text, f"message contains '{expect}'")
+        match, mismatch, errors = filecmp.cmpfiles(snapshot, part, before, shallow=False)
+        check(sorted(os.listdir(part)) == before and not mismatch and not errors,
+              f"existing results byte-identical (changed: {mismatch + errors})")
+
+
+def compare_runs(a_dir, b_dir):
+    """Checks that the run in b_dir repeats the one in a_dir: curve.csv but its seconds, and levels.h5."""
+    import numpy as np
+    a, b = read_curve(a_dir), read_curve(b_dir)
+    check(len(a) == len(b) and len(a) > 0, f"restarted curve has {len(b)} rows ({len(a)})")
+    for ra, rb in zip(a, b):
+        ra = {k: v for k, v in ra.items() if k != "seconds"}
+        rb = {k: v for k, v in rb.items() if k != "seconds"}
+        diff = [k for k in ra if ra[k] != rb.get(k)]
+        check(not diff, f"P/E = {ra['P_over_E']}: restarted row equals the uninterrupted one to all digits (differs in {diff})")
+    ha, hb = h5_levels(os.path.join(a_dir, "levels.h5")), h5_levels(os.path.join(b_dir, "levels.h5"))
+    check(sorted(ha) == sorted(hb), f"levels.h5 groups {sorted(hb)} == {sorted(ha)}")
+    same = all(k in hb[g] and np.array_equal(ha[g][k], hb[g][k]) for g in ha if g in hb for k in ha[g])
+    check(same, "levels.h5 of the restarted run equals the uninterrupted one's, every dataset bit for bit")
+
+
+def restart_settled_case(driver, workdir):
+    levels = [1e-4, 1e-3, 3e-3]
+    gauged = ["-constrain_rotation", "true"]
+    full, part = os.path.join(workdir, "full"), os.path.join(workdir, "part")
+    for d in (full, part):
+        shutil.rmtree(d, ignore_errors=True)
+    rc, _ = compact(driver, full, levels, extra=gauged)
+    check(rc == 0, f"uninterrupted run: exit code {rc}")
+    # One linearization for the attempt and one pseudo-time step: the frictional
+    # solve of the settled state (its gauges released) cannot converge.
+    rc, text = compact(driver, part, levels, extra=gauged + ["-level_attempt_its", "1", "-ptc_max_steps", "1"])
+    checkpoint = os.path.join(part, "checkpoint.h5")
+    check(rc != 0, f"the frictional solve of the settled state fails (exit code {rc})")
+    check("again from the settled state with -level_solver anchored" in text,
+          "the failed frictional solve is tried again from the settled state with anchored")
+    check("-restart " + checkpoint in text, "the error message names -restart and the checkpoint of the settled state")
+    check(os.path.exists(checkpoint), "checkpoint.h5 written after the frictionless settling")
+    check(len(read_curve(part)) == 0, "curve.csv holds no level")
+    settled = os.path.join(workdir, "settled.h5")
+    shutil.copy(checkpoint, settled)
+    rc, text = compact(driver, part, levels, extra=gauged + ["-restart", checkpoint])
+    check(rc == 0 and "the frictionless settling of the first level done" in text,
+          f"restart from the settled state: exit code {rc}")
+    if rc == 0:
+        compare_runs(full, part)
+    cases = [
+        (gauged + ["-restart", settled], [5e-5] + levels[1:], "holds the frictionless settling at P/E = 0.0001, "
+         "but the first level of -pressures (5e-05) settles at P/E = 5e-05"),
+        (gauged + ["-restart", settled, "-settle_frictionless", "false"], levels, "-settle_frictionless false"),
+    ]
+    for extra, pressures, expect in cases:
+        before = sorted(os.listdir(part))
+        snapshot = os.path.join(workdir, "snapshot")
+        shutil.rmtree(snapshot, ignore_errors=True)
+        shutil.copytree(part, snapshot)
+        rc, text = compact(driver, part, pressures, extra=extra)
+        check(rc != 0, f"{' '.join(extra[4:])}, -pressures {pressures}: refused (exit code {rc})")
         check(expect in text, f"message contains '{expect}'")
         match, mismatch, errors = filecmp.cmpfiles(snapshot, part, before, shallow=False)
         check(sorted(os.listdir(part)) == before and not mismatch and not errors,
@@ -373,7 +432,7 @@ def main():
     ap.add_argument("--driver", required=True)
     ap.add_argument("--workdir", required=True)
     ap.add_argument("--mpiexec", default="mpirun")
-    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart", "progress", "packing", "settle",
+    ap.add_argument("case", choices=["friction-to-half", "jump", "mpi", "restart", "restart-settled", "progress", "packing", "settle",
                                          "end-game"])
     a = ap.parse_args()
     os.makedirs(a.workdir, exist_ok=True)
@@ -402,6 +461,8 @@ def main():
                       f"{tag}: Z_nr {rn['Z_no_rattlers']:.4f} vs serial {r1['Z_no_rattlers']:.4f} (within one contact)")
     elif a.case == "restart":
         restart_case(a.driver, a.workdir, a.mpiexec)
+    elif a.case == "restart-settled":
+        restart_settled_case(a.driver, a.workdir)
     elif a.case == "progress":
         progress_case(a.driver, a.workdir, a.mpiexec)
     elif a.case == "packing":

@@ -1,5 +1,7 @@
 // Checkpoints of the drivers: after every pressure level, everything
 // needed to continue the run as if it had never stopped (-restart FILE).
+// compact also writes one inside its first level, after the frictionless
+// settling: it holds no level yet, and its values say so (settled_P_over_E).
 //
 // A checkpoint holds
 //   - the driver's name and its scene options (compact: N_p, kappa, seed,
@@ -56,7 +58,7 @@ struct Checkpoint {
   Scene scene;
   DiskPacking packing;                // compact: the packing the bodies were built from (empty otherwise)
   std::vector<SceneValue> values;     // driver-specific numbers (phi_0, the last level's phi, ...)
-  std::vector<double> levels;         // P/E of the levels done, in order
+  std::vector<double> levels;         // P/E of the levels done, in order (none: a checkpoint inside the first level)
   std::vector<std::string> columns;   // curve.csv header
   std::vector<std::vector<double>> rows;  // one curve.csv row per level done
   double load_step = -1.0;            // the load controller's suggested increment
