@@ -199,17 +199,22 @@ def restart_case(driver, workdir, mpiexec):
         (["-restart", two_levels, "-checkpoint", "maybe"], levels, "maybe"),
     ]
     for extra, pressures, expect in cases:
-        before = sorted(os.listdir(part))
-        snapshot = os.path.join(workdir, "snapshot")
-        shutil.rmtree(snapshot, ignore_errors=True)
-        shutil.copytree(part, snapshot)
         # The scene options come first; a later repeat of an option wins.
-        rc, text = compact(driver, part, pressures, extra=extra)
-        check(rc != 0, f"{' '.join(extra[2:]) or extra[1]}: refused (exit code {rc})")
-        check(expect in text, f"message contains '{expect}'")
-        match, mismatch, errors = filecmp.cmpfiles(snapshot, part, before, shallow=False)
-        check(sorted(os.listdir(part)) == before and not mismatch and not errors,
-              f"existing results byte-identical (changed: {mismatch + errors})")
+        check_refused(driver, workdir, part, pressures, extra, expect, f"{' '.join(extra[2:]) or extra[1]}")
+
+
+def check_refused(driver, workdir, part, pressures, extra, expect, what):
+    """Runs compact into `part` and checks it is refused with `expect` in its message, the results untouched."""
+    before = sorted(os.listdir(part))
+    snapshot = os.path.join(workdir, "snapshot")
+    shutil.rmtree(snapshot, ignore_errors=True)
+    shutil.copytree(part, snapshot)
+    rc, text = compact(driver, part, pressures, extra=extra)
+    check(rc != 0, f"{what}: refused (exit code {rc})")
+    check(expect in text, f"message contains '{expect}'")
+    match, mismatch, errors = filecmp.cmpfiles(snapshot, part, before, shallow=False)
+    check(sorted(os.listdir(part)) == before and not mismatch and not errors,
+          f"existing results byte-identical (changed: {mismatch + errors})")
 
 
 def compare_runs(a_dir, b_dir):
@@ -259,16 +264,7 @@ def restart_settled_case(driver, workdir):
         (gauged + ["-restart", settled, "-settle_frictionless", "false"], levels, "-settle_frictionless false"),
     ]
     for extra, pressures, expect in cases:
-        before = sorted(os.listdir(part))
-        snapshot = os.path.join(workdir, "snapshot")
-        shutil.rmtree(snapshot, ignore_errors=True)
-        shutil.copytree(part, snapshot)
-        rc, text = compact(driver, part, pressures, extra=extra)
-        check(rc != 0, f"{' '.join(extra[4:])}, -pressures {pressures}: refused (exit code {rc})")
-        check(expect in text, f"message contains '{expect}'")
-        match, mismatch, errors = filecmp.cmpfiles(snapshot, part, before, shallow=False)
-        check(sorted(os.listdir(part)) == before and not mismatch and not errors,
-              f"existing results byte-identical (changed: {mismatch + errors})")
+        check_refused(driver, workdir, part, pressures, extra, expect, f"{' '.join(extra[4:])}, -pressures {pressures}")
 
 
 def packing_case(driver, workdir):
