@@ -492,20 +492,17 @@ PetscErrorCode Run(MPI_Comm comm) {
         PetscLogDouble t_settled;
         PetscCall(PetscTime(&t_settled));
         rep.seconds = t_settled - t_start;
-        // On large packings the settling is most of the first level (about
-        // 800 of 1000 Newton iterations at 1500 disks): -restart takes up
-        // the frictional solve from here.
-        if (opts.checkpoint) {
-          Checkpoint c = RunCheckpoint(phi0, 0.0);
-          const std::vector<SceneValue> settling = SettlingValues(P_settle / params.young, rep);
-          c.values.insert(c.values.end(), settling.begin(), settling.end());
-          c.columns = kCurveColumns;
-          c.load_step = step;
-          c.state = problem.TakeSnapshot();
-          PetscCall(WriteCheckpoint(comm, opts.output_dir + "/checkpoint.h5", c));
-        }
       }
       const CompactionProblem::Snapshot settled = problem.TakeSnapshot();
+      if (!restart_settled) {
+        // On large packings the settling is most of the first level (about
+        // 800 to 1300 of its Newton iterations at 1500 disks): -restart takes
+        // up the frictional solve from here.
+        Checkpoint c = RunCheckpoint(phi0, 0.0);
+        const std::vector<SceneValue> settling = SettlingValues(P_settle / params.young, rep);
+        c.values.insert(c.values.end(), settling.begin(), settling.end());
+        PetscCall(outputs.MidLevelCheckpoint(opts.pressures, step, settled, c));
+      }
       problem.SetFrictionActive(true);
       SolveReport again;
       PetscCall(SolveLevel(problem, load.level, P_settle, &again));
@@ -533,7 +530,7 @@ PetscErrorCode Run(MPI_Comm comm) {
                  "%s%s%s, or try -settle_frictionless false (much slower on large packings)",
                  P_settle / params.young, SNESConvergedReasons[again.reason],
                  opts.checkpoint ? "take it up from the settled state with other solver options by -restart " : "",
-                 opts.checkpoint ? (opts.output_dir + "/checkpoint.h5").c_str() : "",
+                 outputs.CheckpointPath().c_str(),
                  opts.checkpoint ? ", or run it on another number of ranks (another path)"
                                  : "on several ranks run it again (the settling takes another path each time)");
       LevelReport rest;

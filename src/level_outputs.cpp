@@ -45,6 +45,19 @@ PetscErrorCode LevelOutputs::Level(size_t level, const std::vector<double> &pres
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode LevelOutputs::MidLevelCheckpoint(const std::vector<double> &pressures, double load_step,
+                                                const CompactionProblem::Snapshot &state, Checkpoint c) {
+  PetscFunctionBeginUser;
+  if (!files_.checkpoint) PetscFunctionReturn(0);
+  c.columns = columns_;
+  c.rows = rows_;
+  c.levels.assign(pressures.begin(), pressures.begin() + rows_.size());
+  c.load_step = load_step;
+  c.state = state;
+  PetscCall(WriteCheckpoint(comm_, CheckpointPath(), c));
+  PetscFunctionReturn(0);
+}
+
 std::string LevelOutputs::Written() const {
   return "curve.csv" + std::string(files_.hdf5 ? ", levels.h5, levels.xdmf" : "") +
          (files_.checkpoint ? ", checkpoint.h5" : "");

@@ -4,7 +4,8 @@
 //   levels.h5      the state of every level (output.hpp) and levels.xdmf
 //                  beside it (xdmf.hpp); a new run removes an old file, a
 //                  restart truncates it to the levels of its checkpoint;
-//   checkpoint.h5  after every level: what -restart needs (checkpoint.hpp).
+//   checkpoint.h5  after every level (and where a driver asks, inside one):
+//                  what -restart needs (checkpoint.hpp).
 #pragma once
 #include <map>
 #include <string>
@@ -35,6 +36,12 @@ class LevelOutputs {
   // and which is completed with the curve, the load step and the state.
   PetscErrorCode Level(size_t level, const std::vector<double> &pressures, const std::map<std::string, double> &row,
                        double load_step, const CompactionProblem &problem, Checkpoint c);
+  // A checkpoint inside level LevelsDone() (compact: after its frictionless
+  // settling), with `state` and `c` as for Level; nothing else is written.
+  PetscErrorCode MidLevelCheckpoint(const std::vector<double> &pressures, double load_step,
+                                    const CompactionProblem::Snapshot &state, Checkpoint c);
+  // Where the checkpoints go ("" with checkpoints off).
+  std::string CheckpointPath() const { return files_.checkpoint ? files_.dir + "/checkpoint.h5" : ""; }
   // "curve.csv, levels.h5, checkpoint.h5": what the run writes.
   std::string Written() const;
 
