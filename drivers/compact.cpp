@@ -404,7 +404,7 @@ PetscErrorCode Run(MPI_Comm comm) {
     rigid_params.ncp_scale = 1.0;
     CompactionProblem rigid(comm);
     PetscCall(rigid.SetParameters(rigid_params));
-    rigid.SetOptionsPrefix("settle_");  // its solver options: -settle_snes_*, -settle_ksp_*, -settle_pc_*
+    rigid.SetOptionsPrefix("settle_");  // its solver options: -settle_snes_*, -settle_ksp_*, -settle_pc_*, -settle_ldlt_*
     DiskPacking all_rigid = packing;
     std::fill(all_rigid.deformable.begin(), all_rigid.deformable.end(), 0);
     rigid.AddPacking(all_rigid, unit_mesh);

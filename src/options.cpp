@@ -119,7 +119,8 @@ bool reading_options = true;
 
 PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   // Prefixes of options read after start-up: by the SNES / KSP / PC / Mat of
-  // each solve (settle_*: compact's rigid pre-settling), the Jacobian (jac_),
+  // each solve (settle_*: compact's rigid pre-settling), the Jacobian (jac_), the
+  // LDL^T factorization of the symmetric Newton matrix (ldlt_),
   // the ASM subdomain solvers (sub_), logging, viewers and PETSc's own run-time.
   static const char *const later[] = {"snes_", "ksp_", "pc_", "mat_", "jac_", "log", "info", "options_", "malloc",
                                       "help", "version", "on_error", "no_signal_handler", "fp_trap", "memory_view",
@@ -128,7 +129,8 @@ PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
                                       "history", "tmp", "shared_tmp", "not_shared_tmp", "skip_petscrc",
                                       "objects_dump", "checkstack", "get_total_flops", "use_gpu_aware_mpi", "saws",
                                       "display", "nox", "x_virtual", "python", "dm_", "is_", "sf_", "options_file", "sub_",
-                                      "settle_snes_", "settle_ksp_", "settle_pc_", "settle_mat_", "settle_sub_"};
+                                      "settle_snes_", "settle_ksp_", "settle_pc_", "settle_mat_", "settle_sub_", "ldlt_",
+                                      "settle_ldlt_"};
   PetscInt n;
   char **names, **values;
   std::string unknown;

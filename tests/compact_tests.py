@@ -35,7 +35,8 @@ Cases
                     are refused with a clear message before anything is written
   settle            the default scene with -level_max_its 1: auto's newton cannot do
                     the rigid or the frictionless settling in one load step, hybrid
-                    does each from the state before it, and the run completes
+                    does each from the state before it, and the run completes; the
+                    options of their LDL^T solves (-ldlt_*, -settle_ldlt_*) are read
   progress          12 disks: with -progress_interval 0 a progress line follows every
                     pseudo-time step, on 1 and on 2 ranks (printed once); the last
                     line of each sub-step counts its Newton iterations, and per
@@ -376,10 +377,17 @@ def settle_case(driver, workdir):
     settling must then be solved by hybrid from the state before it (without
     that, every step cut of the settling fails and compact stops). The levels
     that follow are frictional (hybrid), so the run completes; every level
-    must pass the acceptance checks of run_compact."""
+    must pass the acceptance checks of run_compact. Both settlings factor
+    newton's symmetric Newton matrix by LDL^T, whose solver options carry the
+    prefixes ldlt_ and settle_ldlt_: they must be accepted and read."""
     default_opts = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "petsc-options", "default.opts")
+    log = []
     rows = run_compact(driver, os.path.join(workdir, "max-its-1"), [1e-4, 1e-3], timeout=600,
-                       scene=["-options_file", default_opts], extra=["-level_max_its", "1", "-checkpoint", "false"])
+                       scene=["-options_file", default_opts],
+                       extra=["-level_max_its", "1", "-checkpoint", "false", "-ldlt_ksp_converged_reason",
+                              "-settle_ldlt_ksp_converged_reason"], log=log)
+    for prefix in ("ldlt_", "settle_ldlt_"):
+        check(f"Linear {prefix} solve converged" in log[0], f"-{prefix}ksp_converged_reason is read by the LDL^T solves")
     if rows:
         check(rows[0]["newton_its"] > 1, f"the settling level took {rows[0]['newton_its']:.0f} > 1 Newton iterations"
                                          " (hybrid after newton's single linearization)")
