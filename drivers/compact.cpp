@@ -213,11 +213,14 @@ double SettlingPressure(double P1_over_E) { return std::min(P1_over_E, 1e-4); }
 // converges after about 450, while with 400 hybrid started again from the
 // settled rigid packing and crept for over an hour without passing the
 // level criterion (docs/level-solver-measurements.md, "Measured: the
-// 1500-disk paper scene"). Other strategies step as usual.
+// 1500-disk paper scene"). Other strategies step as usual. *newton_its (if
+// given): the Newton iterations of auto's load step where hybrid had to
+// take over (they are counted in rep too), else 0.
 constexpr PetscInt kSettleBudget = 5;
 PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &load, double pressure, double *step,
-                      LevelReport *rep) {
+                      LevelReport *rep, PetscInt *newton_its = nullptr) {
   PetscFunctionBeginUser;
+  if (newton_its) *newton_its = 0;
   if (load.level.strategy != LevelStrategy::Auto) {
     PetscCall(AdvanceToPressure(problem, load, pressure, step, rep));
     PetscFunctionReturn(0);
@@ -234,6 +237,7 @@ PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &l
     PetscFunctionReturn(0);
   }
   const LevelReport first = *rep;
+  if (newton_its) *newton_its = first.newton_its;
   LoadControlParameters hybrid = load;
   hybrid.level.strategy = LevelStrategy::Hybrid;
   *step = step_before;
@@ -413,15 +417,20 @@ PetscErrorCode Run(MPI_Comm comm) {
     // At most P/E = 1e-4: contacts exact, deformations negligible; larger
     // first levels are then reached by load stepping.
     const double P_settle = std::min(opts.pressures[0], 1e-4) * params.young;
-    PetscCall(Settle(rigid, load, P_settle, &step, &rep));
+    PetscInt failed_its = 0;
+    PetscCall(Settle(rigid, load, P_settle, &step, &rep, &failed_its));
     for (int i = 0; i < packing.size(); ++i) {
       double x[2];
       rigid.RigidPosition(i, x, nullptr);
       packing.x[i] = x[0], packing.y[i] = x[1];
     }
     std::copy(rigid.Walls(), rigid.Walls() + 4, packing.walls);
-    PetscCall(PetscPrintf(comm, "  rigid settling at P/E = %g: phi = %.5f, %" PetscInt_FMT " Newton iterations, %.2f s\n",
-                          P_settle / params.young, rigid.Summary().packing_fraction, rep.newton_its, rep.seconds));
+    char split[96] = "";
+    if (failed_its > 0)
+      PetscCall(PetscSNPrintf(split, sizeof split, " (%" PetscInt_FMT " in newton's load step, which failed, then %" PetscInt_FMT " by hybrid)",
+                              failed_its, rep.newton_its - failed_its));
+    PetscCall(PetscPrintf(comm, "  rigid settling at P/E = %g: phi = %.5f, %" PetscInt_FMT " Newton iterations%s, %.2f s\n",
+                          P_settle / params.young, rigid.Summary().packing_fraction, rep.newton_its, split, rep.seconds));
   }
   CompactionProblem problem(comm);
   PetscCall(problem.SetParameters(params));
