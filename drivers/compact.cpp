@@ -207,27 +207,34 @@ double SettlingPressure(double P1_over_E) { return std::min(P1_over_E, 1e-4); }
 // where hybrid settles in 213 iterations (11 s on 2 ranks), and the
 // frictionless settling of the mixture at P/E 1e-5 failed at every cut
 // down to 3e-7 P (halving the pressure does not make the geometry easier).
-// A settling step is not halved, so its newton gets kSettleBudget times
-// -level_max_its linearizations before hybrid takes over: on the 1500-disk
-// paper scene (-constrain_rotation true, 2 ranks) the frictionless settling
-// converges after about 450, while with 400 hybrid started again from the
-// settled rigid packing and crept for over an hour without passing the
-// level criterion (docs/level-solver-measurements.md, "Measured: the
-// 1500-disk paper scene"). Other strategies step as usual. *newton_its (if
-// given): the Newton iterations of auto's load step where hybrid had to
-// take over (they are counted in rep too), else 0.
+// A settling step is not halved, so its newton gets budget times
+// -level_max_its linearizations before hybrid takes over. The frictionless
+// settling of the mixture gets kSettleBudget: on the 1500-disk paper scene
+// (-constrain_rotation true, 2 ranks) it converges after about 450, while
+// with 400 hybrid started again from the settled rigid packing and crept
+// for over an hour without passing the level criterion
+// (docs/level-solver-measurements.md, "Measured: the 1500-disk paper
+// scene"). The rigid settling gets 1: its newton converges in a few
+// iterations or not at all (the paper's scene at 200 disks: 2; at 400 it
+// fails after 1663, at 1500 after the 2000 of kSettleBudget, 19 and 62 s
+// on one rank, before hybrid settles it in 11 and 250), and hybrid starts
+// from the state before it whatever the budget. Other strategies step as
+// usual. *newton_its (if given): the Newton iterations of auto's load step
+// where hybrid had to take over (they are counted in rep too), else 0.
 constexpr PetscInt kSettleBudget = 5;
 PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &load, double pressure, double *step,
-                      LevelReport *rep, PetscInt *newton_its = nullptr) {
+                      LevelReport *rep, PetscInt budget, PetscInt *newton_its = nullptr) {
   PetscFunctionBeginUser;
   if (newton_its) *newton_its = 0;
   if (load.level.strategy != LevelStrategy::Auto) {
     PetscCall(AdvanceToPressure(problem, load, pressure, step, rep));
     PetscFunctionReturn(0);
   }
+  PetscLogDouble t_start;
+  PetscCall(PetscTime(&t_start));
   LoadControlParameters once = load;
   once.max_cuts = 0;
-  once.level.max_its = kSettleBudget * load.level.max_its;
+  once.level.max_its = budget * load.level.max_its;
   const double step_before = *step;
   PetscCall(PetscPushErrorHandler(PetscReturnErrorHandler, nullptr));
   const PetscErrorCode ierr = AdvanceToPressure(problem, once, pressure, step, rep);
@@ -242,7 +249,10 @@ PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &l
   hybrid.level.strategy = LevelStrategy::Hybrid;
   *step = step_before;
   PetscCall(AdvanceToPressure(problem, hybrid, pressure, step, rep));
+  PetscLogDouble t_end;
+  PetscCall(PetscTime(&t_end));
   AddCounts(first, rep);
+  rep->seconds = t_end - t_start;  // newton's failed load step included
   PetscFunctionReturn(0);
 }
 
@@ -418,7 +428,7 @@ PetscErrorCode Run(MPI_Comm comm) {
     // first levels are then reached by load stepping.
     const double P_settle = std::min(opts.pressures[0], 1e-4) * params.young;
     PetscInt failed_its = 0;
-    PetscCall(Settle(rigid, load, P_settle, &step, &rep, &failed_its));
+    PetscCall(Settle(rigid, load, P_settle, &step, &rep, 1, &failed_its));
     for (int i = 0; i < packing.size(); ++i) {
       double x[2];
       rigid.RigidPosition(i, x, nullptr);
@@ -497,7 +507,7 @@ PetscErrorCode Run(MPI_Comm comm) {
         rep = SettlingReport(restart);
       } else {
         problem.SetFrictionActive(false);
-        PetscCall(Settle(problem, load, P_settle, &step, &rep));
+        PetscCall(Settle(problem, load, P_settle, &step, &rep, kSettleBudget));
         PetscLogDouble t_settled;
         PetscCall(PetscTime(&t_settled));
         rep.seconds = t_settled - t_start;
