@@ -216,8 +216,8 @@ double SettlingPressure(double P1_over_E) { return std::min(P1_over_E, 1e-4); }
 // (docs/level-solver-measurements.md, "Measured: the 1500-disk paper
 // scene"). The rigid settling gets 1: its newton converges in a few
 // iterations or not at all (the paper's scene at 200 disks: 2; at 400 it
-// fails after 1663, at 1500 after the 2000 of kSettleBudget, 19 and 62 s
-// on one rank, before hybrid settles it in 11 and 250), and hybrid starts
+// fails after 1663, at 1500 after the 2000 of kSettleBudget, and hybrid
+// settles it in 11 and 250: 19 and 68 s in all on one rank), and hybrid starts
 // from the state before it whatever the budget. Other strategies step as
 // usual. *newton_its (if given): the Newton iterations of auto's load step
 // where hybrid had to take over (they are counted in rep too), else 0.

@@ -35,8 +35,9 @@ Cases
                     are refused with a clear message before anything is written
   settle            the default scene with -level_max_its 1: auto's newton cannot do
                     the rigid or the frictionless settling in one load step, hybrid
-                    does each from the state before it, and the run completes; the
-                    options of their LDL^T solves (-ldlt_*, -settle_ldlt_*) are read
+                    does each from the state before it (the rigid settling's line
+                    says so), and the run completes; the options of their LDL^T
+                    solves (-ldlt_*, -settle_ldlt_*) are read
   progress          12 disks: with -progress_interval 0 a progress line follows every
                     pseudo-time step, on 1 and on 2 ranks (printed once); the last
                     line of each sub-step counts its Newton iterations, and per
@@ -388,6 +389,12 @@ def settle_case(driver, workdir):
                               "-settle_ldlt_ksp_converged_reason"], log=log)
     for prefix in ("ldlt_", "settle_ldlt_"):
         check(f"Linear {prefix} solve converged" in log[0], f"-{prefix}ksp_converged_reason is read by the LDL^T solves")
+    # The rigid settling's line splits its iterations between newton's failed load step and hybrid.
+    m = re.search(r"rigid settling at P/E = \S+: phi = \S+, (\d+) Newton iterations \((\d+) in newton's load step, "
+                  r"which failed, then (\d+) by hybrid\)", log[0])
+    if check(m is not None, "the rigid settling's line names newton's failed load step and hybrid's iterations"):
+        check(int(m[2]) == 1 and int(m[1]) == int(m[2]) + int(m[3]),
+              f"newton's load step took its one linearization ({m[2]}), and the parts add up to {m[1]}")
     if rows:
         check(rows[0]["newton_its"] > 1, f"the settling level took {rows[0]['newton_its']:.0f} > 1 Newton iterations"
                                          " (hybrid after newton's single linearization)")
