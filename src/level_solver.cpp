@@ -505,11 +505,11 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         // Step fraction: open and touching contacts not driven deep into penetration, and
         // no body moving (or turning, times its radius) more than m <d> in
         // one step: the shift alone does not bound a mode whose force is far
-        // below |F|_inf. Hybrid's attempt takes no contact cut: starting
-        // from the tangent predictor with overlaps up to kAttemptOverlap, at
-        // 1500 disks some contact always asked for the cut's floor of a
-        // tenth, so |F| fell by a tenth per iteration and the attempt ended
-        // overlapping and was thrown away on 18 of 19 frictional levels
+        // below |F|_inf. Hybrid's attempt takes no contact cut: it starts
+        // from the tangent predictor with overlaps up to kAttemptOverlap,
+        // and with the cut some contact of a 1500-disk packing asks for its
+        // floor of a tenth at every iteration, so that |F| falls by a tenth
+        // per iteration and the attempt ends overlapping
         // (docs/level-solver-measurements.md, "Measured: the attempt handed
         // over"). Its end state is checked for overlap anyway.
         double alpha0 = 1.0, full_move;

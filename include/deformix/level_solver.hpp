@@ -95,10 +95,11 @@
 //   started from the tangent predictor with overlaps up to 0.1 <d> admitted
 //   (newton's first steps move bodies by 0.1 <d> and more, so it closes such
 //   overlaps in a step or two, where anchored's damped first steps would
-//   creep). A level that only deforms the packing converges there. When it
-//   does not, anchored goes on from the attempt's last iterate if no body
-//   overlaps there by more than 1e-3 <d> (else from the undone load step),
-//   and the level counts the iterations of both.
+//   creep); its steps are not cut at contacts (newton's contact step
+//   fraction). A level that only deforms the packing converges there. When
+//   it does not, anchored goes on from the attempt's last iterate if no body
+//   overlaps there by more than 1e-3 <d> by the contact laws' gaps (else
+//   from the undone load step), and the level counts the iterations of both.
 // auto (the default): newton with the energy merit on levels without
 //   friction (a frictionless packing, and the frictionless settling level of
 //   a frictional one), where the enthalpy is the exact potential; hybrid
