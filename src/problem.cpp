@@ -1314,12 +1314,7 @@ PetscErrorCode CompactionProblem::EvaluateJacobian(Vec z, Mat *J) {
 // (inside it the gap is continuous). Reads the replicated state.
 PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
   PetscFunctionBeginUser;
-  const double pen_tol = 1e-9 * mean_diameter_;
-  std::set<std::tuple<int, int, int, int, int>> current;
-  for (const ContactCandidate &c : candidates_) current.insert(CandidateKey(c));
-  *stale = false;
-  for (const ContactCandidate &c : DetectCandidates(-pen_tol / mean_diameter_))
-    if (!current.count(CandidateKey(c))) *stale = true;
+  *stale = DetectsNonCandidate(-1e-9);
   std::vector<double> zfull(n_total_);
   Pack(zfull.data());
   for (const ContactCandidate &c : candidates_) {
@@ -1331,6 +1326,14 @@ PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
   PetscFunctionReturn(0);
 }
 
+bool CompactionProblem::DetectsNonCandidate(double margin) const {
+  std::set<std::tuple<int, int, int, int, int>> current;
+  for (const ContactCandidate &c : candidates_) current.insert(CandidateKey(c));
+  for (const ContactCandidate &c : DetectCandidates(margin))
+    if (!current.count(CandidateKey(c))) return true;
+  return false;
+}
+
 bool CompactionProblem::PredictionAdmissible(double overlap_limit) const {
   const StateSummary predicted = Summary();
   // The overlaps are those of the contact laws (max_penetration over the
@@ -1340,12 +1343,9 @@ bool CompactionProblem::PredictionAdmissible(double overlap_limit) const {
   // contacts between deformable disks exceed 1e-3 <d> beyond P/E ~ 0.1,
   // where the laws' overlaps are far smaller (docs/level-solver-
   // measurements.md, "Measured: the attempt handed over").
-  std::set<std::tuple<int, int, int, int, int>> current;
-  for (const ContactCandidate &c : candidates_) current.insert(CandidateKey(c));
-  bool missing = false;
-  for (const ContactCandidate &c : DetectCandidates(-overlap_limit)) missing = missing || !current.count(CandidateKey(c));
   const bool admissible = predicted.min_cell_area_ratio > 0.0 &&
-                          predicted.max_penetration < overlap_limit * mean_diameter_ && !missing;
+                          predicted.max_penetration < overlap_limit * mean_diameter_ &&
+                          !DetectsNonCandidate(-overlap_limit);
   // -info: why a predicted state was rejected (BeginLoadStep then halves
   // the prediction; hybrid's attempt then starts anchored from the start of
   // the load step).

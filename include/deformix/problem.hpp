@@ -342,6 +342,9 @@ class CompactionProblem {
   // True when a non-candidate pair penetrates or a node left its segment
   // window at the current state: RefreshCandidates, then continue.
   PetscErrorCode CandidatesStale(bool *stale) const;
+  // Whether the detection finds a pair closer than margin <d> (negative: an
+  // overlap) that is not a contact candidate.
+  bool DetectsNonCandidate(double margin) const;
   // Largest fraction (>= 1/10) of the update dz that does not drive a contact
   // (open or touching) deeper than kOpenOvershoot <d> into penetration; needs
   // the residual last evaluated at the iterate.
