@@ -141,6 +141,14 @@ constexpr double kMaxMove = 0.5;        // trust radius cap, in <d>
 constexpr int kMaxRejections = 12;      // rejected trial steps in a row before the load step fails
 constexpr int kBacktracks = 4;          // step fractions 1, 1/2, 1/4, 1/8 tried before a larger shift
 constexpr double kAttemptOverlap = 0.1; // hybrid: deepest overlap of the newton attempt's predicted state, in <d>
+// hybrid: deepest overlap (by the contact laws' gaps) of the attempt's last
+// iterate that anchored goes on from, in <d>. Ten times the predictors'
+// limit: the attempt often ends near balance with a contact or two a few
+// 1e-3 <d> deep, which anchored's first step closes, where starting again
+// from the undone load step repeats the level's whole compaction in damped
+// steps (docs/level-solver-measurements.md, "Measured: the overlap limit
+// of the attempt's hand-over").
+constexpr double kHandoverOverlap = 1e-2;
 // The energy merit accepts a trial below the largest merit of this many
 // iterates (the iterate's and its predecessors'). Newton steps that roll
 // deformable disks along their contacts lose their accuracy within a
@@ -211,8 +219,8 @@ class MeritNewton {
   // With left_open, the attempt of hybrid: the tangent predictor with
   // overlaps up to kAttemptOverlap, at most prm_.attempt_its linearizations;
   // on failure the load step is left open at the last accepted iterate
-  // (*left_open) when anchored can start from it (no overlap deeper than the
-  // predictors' limit), else undone.
+  // (*left_open) when anchored can start from it (no overlap deeper than
+  // kHandoverOverlap), else undone.
   PetscErrorCode Solve(double pressure, SolveReport *report, bool *left_open = nullptr);
 
  private:
@@ -637,7 +645,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
   if (converged) report->reason = SNES_CONVERGED_FNORM_ABS;
   if (attempt && !converged) {
     PetscCall(p_.AdoptState(z_));
-    if (p_.PredictionAdmissible(CompactionProblem::kPredictionOverlap)) {
+    if (p_.PredictionAdmissible(kHandoverOverlap)) {
       *left_open = true;
       PetscFunctionReturn(0);
     }

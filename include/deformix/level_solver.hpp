@@ -98,7 +98,7 @@
 //   creep); its steps are not cut at contacts (newton's contact step
 //   fraction). A level that only deforms the packing converges there. When
 //   it does not, anchored goes on from the attempt's last iterate if no body
-//   overlaps there by more than 1e-3 <d> by the contact laws' gaps (else
+//   overlaps there by more than 1e-2 <d> by the contact laws' gaps (else
 //   from the undone load step), and the level counts the iterations of both.
 // auto (the default): newton with the energy merit on levels without
 //   friction (a frictionless packing, and the frictionless settling level of
