@@ -1,5 +1,6 @@
 #include "deformix/options.hpp"
 
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -144,6 +145,25 @@ PetscErrorCode CheckUnknownOptions(MPI_Comm comm) {
   PetscCall(PetscOptionsLeftRestore(nullptr, &n, &names, &values));
   PetscCheck(unknown.empty(), comm, PETSC_ERR_USER_INPUT,
              "unknown option(s) %s: check the spelling against -help", unknown.c_str());
+  // PETSc takes one value per option and skips any further word, so
+  // "-pressures 1e-5 3e-5" would run the first level alone: a word that is
+  // neither an option nor the value right after one is refused. An option
+  // starts with '-' and a letter; "-1" and "-.5" are values.
+  int argc = 0;
+  char **argv = nullptr;
+  PetscCall(PetscGetArgs(&argc, &argv));
+  const auto is_option = [](const char *a) { return a[0] == '-' && std::isalpha(static_cast<unsigned char>(a[1])); };
+  for (int i = 1; i < argc; ++i) {
+    if (is_option(argv[i])) {
+      if (i + 1 < argc && !is_option(argv[i + 1])) ++i;  // its value
+      continue;
+    }
+    const std::string after = i >= 2 ? std::string(" after ") + argv[i - 2] + " " + argv[i - 1] : "";
+    SETERRQ(comm, PETSC_ERR_USER_INPUT,
+            "stray argument '%s'%s: an option takes one value, and lists are comma-separated "
+            "(for instance -pressures 1e-5,3e-5,1e-4)",
+            argv[i], after.c_str());
+  }
   reading_options = false;
   PetscFunctionReturn(0);
 }
