@@ -32,11 +32,21 @@ earlier commit, built from a worktree) with its own default level solver;
 --baseline-env VAR=VALUE ... sets its environment (for instance
 LD_LIBRARY_PATH=/usr/lib/x86_64-linux-gnu/blas:/usr/lib/x86_64-linux-gnu/lapack:
 the reference BLAS instead of OpenBLAS).
+--restart FILE starts every run from the checkpoint FILE (compact's
+-restart; the scenes' options must be the checkpoint's) and leaves the
+checkpoint's levels out of the rows: every strategy then solves the same
+levels from the same state, a paired comparison (bit for bit repeatable
+on one rank; on two, MUMPS' parallel factorization differs in its last
+digits from run to run, docs/parallel.md, and a whole curve from its
+settling is one sample of its path).
+--reuse reads the runs that an earlier invocation with the same arguments
+left in --runs (their curve.csv and log.txt) instead of running them.
 
 Usage:
   /usr/bin/python3 scripts/bench_solver.py --scenes default
   /usr/bin/python3 scripts/bench_solver.py --scenes default campaign50 --pressures 1e-4,3e-4,1e-3,3e-3,0.01,0.02,0.05 --jobs 2
   /usr/bin/python3 scripts/bench_solver.py --strategies anchored/whole anchored/adaptive newton/whole newton/adaptive
+  /usr/bin/python3 scripts/bench_solver.py --scenes paper1500 --ranks 1 --jobs 2 --strategies auto --baseline OLD/compact --restart CHECKPOINT
 """
 import argparse
 import concurrent.futures as cf
@@ -44,6 +54,7 @@ import csv
 import math
 import os
 import platform
+import re
 import subprocess
 import sys
 import textwrap
@@ -114,24 +125,38 @@ def run_one(a, scene, label, ranks, opts, strategy):
     if env and mpi:
         mpi += [x for kv in a.baseline_env for x in ("-x", kv.split("=", 1)[0])]
     cmd = mpi + \
-          [exe] + opts + solver + ["-output_dir", out, "-checkpoint", "false"] + a.extra.split()
-    # The run's output goes to log.txt as it comes (a long run's progress
-    # lines can be followed there), after the command line.
+          [exe] + opts + solver + ["-output_dir", out, "-checkpoint", "false"] + a.extra.split() + \
+          (["-restart", a.restart] if a.restart else [])
+    log = os.path.join(out, "log.txt")
     t0 = time.time()
-    with open(os.path.join(out, "log.txt"), "w") as f:
-        f.write(" ".join((["env"] + a.baseline_env if env else []) + cmd) + "\n")
-        f.flush()
-        try:
-            p = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, timeout=a.timeout, env=env)
-            status = "ok" if p.returncode == 0 else "failed"
-        except subprocess.TimeoutExpired:
-            status = "timeout"
+    if a.reuse:
+        with open(log) as f:
+            text = f.read()
+        status = "ok" if "wrote " in text else "failed"
+    else:
+        # The run's output goes to log.txt as it comes (a long run's progress
+        # lines can be followed there), after the command line.
+        with open(log, "w") as f:
+            f.write(" ".join((["env"] + a.baseline_env if env else []) + cmd) + "\n")
+            f.flush()
+            try:
+                p = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, timeout=a.timeout, env=env)
+                status = "ok" if p.returncode == 0 else "failed"
+            except subprocess.TimeoutExpired:
+                status = "timeout"
+        with open(log) as f:
+            text = f.read()
     wall = time.time() - t0
+    # A restarted run's curve.csv begins with the checkpoint's levels.
+    done = re.search(r"restart from .*: (\d+) level\(s\) done", text)
+    skip = int(done.group(1)) if done else 0
     rows = []
     curve = os.path.join(out, "curve.csv")
     if os.path.exists(curve):
         with open(curve) as f:
-            for r in csv.DictReader(f):
+            for i, r in enumerate(csv.DictReader(f)):
+                if i < skip:
+                    continue
                 P = float(r["P_over_E"])
                 rows.append({
                     "scene": scene, "run": label, "strategy": strategy, "ranks": ranks, "status": status,
@@ -215,6 +240,8 @@ def main():
                     help="environment of the baseline runs (e.g. LD_LIBRARY_PATH of another BLAS)")
     ap.add_argument("--mpiexec", default="mpiexec")
     ap.add_argument("--extra", default="", help="extra compact options for every run")
+    ap.add_argument("--restart", default="", help="checkpoint every run starts from (compact -restart)")
+    ap.add_argument("--reuse", action="store_true", help="read the runs left in --runs instead of running them")
     ap.add_argument("--runs", default=os.path.join(ROOT, "out", "bench_solver"))
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "solver"))
     a = ap.parse_args()
