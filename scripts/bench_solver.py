@@ -130,6 +130,8 @@ def run_one(a, scene, label, ranks, opts, strategy):
     log = os.path.join(out, "log.txt")
     t0 = time.time()
     if a.reuse:
+        if not os.path.exists(log):
+            sys.exit(f"--reuse: no run in {out} (run the benchmark without --reuse first)")
         with open(log) as f:
             text = f.read()
         status = "ok" if "wrote " in text else "failed"
