@@ -695,6 +695,7 @@ class AnchoredContinuation {
   std::vector<char> monitor_states_;        // contact states at the last monitored iterate
   std::vector<std::uint64_t> history_;      // hashes of the contact states of the last Newton iterates (DetectCycle)
   bool backtrack_ = false;                  // DetectCycle found an active-set cycle: Backtrack this step
+  std::deque<std::pair<std::vector<char>, double>> recent_;  // contact states and |R| of the last two Newton iterates (DetectCycle)
   double fnorm0_ = 0.0;
   bool stalled_ = false;  // the last inner solve ended at ptc_stall_its with |G| decreased (Converged)
   Vec best_ = nullptr;      // the inner solve's iterate of least |G| so far (Converged)
@@ -880,10 +881,15 @@ PetscErrorCode AnchoredContinuation::Monitor(SNES snes, PetscInt it, PetscReal f
 // iterations ago (and is not the last one), the post-check (Backtrack)
 // shortens the step, which lands between the two regions and breaks the
 // cycle. States are compared on all ranks, as one hash of every contact's
-// state: in a large packing other contacts switch at the same time, so a
-// local cycle there goes undetected (1500 disks: docs/level-solver-
-// measurements.md, end of "Measured: the knobs of anchored").
-PetscErrorCode AnchoredContinuation::DetectCycle(SNESLineSearch, Vec, Vec, PetscBool *changed, void *ctx) {
+// state, and contact by contact: in a large packing other contacts switch
+// at the same time, so the hash never repeats in a local cycle, in which
+// some contacts return to their state of two iterates ago while |R| does
+// not fall (1500 disks: 15-30 contacts around a rigid disk turning back
+// and forth by 4e-3 rad at every iteration, |R| alternating between two
+// values for 60 pseudo-time steps; docs/level-solver-measurements.md,
+// "Measured: local active-set cycles in anchored"). The norm guard keeps
+// healthy iterations, which halve |R| in two, out of the backtracking.
+PetscErrorCode AnchoredContinuation::DetectCycle(SNESLineSearch ls, Vec, Vec, PetscBool *changed, void *ctx) {
   auto *a = static_cast<AnchoredContinuation *>(ctx);
   PetscFunctionBeginUser;
   *changed = PETSC_FALSE;
@@ -895,6 +901,23 @@ PetscErrorCode AnchoredContinuation::DetectCycle(SNESLineSearch, Vec, Vec, Petsc
     if (hist[hist.size() - k] == h && hist.back() != h) cycle = true;
   hist.push_back(h);
   if (hist.size() > 4) hist.erase(hist.begin());
+  // A local cycle: some contacts back in the state they had two iterates
+  // ago while |R| has not halved over those two iterations.
+  PetscReal xnorm, fnorm, ynorm;
+  PetscCall(SNESLineSearchGetNorms(ls, &xnorm, &fnorm, &ynorm));
+  const std::vector<char> &now = a->p_.ActiveSet();
+  std::deque<std::pair<std::vector<char>, double>> &recent = a->recent_;
+  if (!cycle && recent.size() == 2 && fnorm > 0.5 * recent[0].second && recent[0].first.size() == now.size() &&
+      recent[1].first.size() == now.size()) {
+    int n = 0;
+    for (size_t c = 0; c < now.size(); ++c) n += now[c] == recent[0].first[c] && now[c] != recent[1].first[c];
+    cycle = n > 0;
+    if (cycle && a->prm_.ptc_monitor)
+      PetscCall(PetscPrintf(a->comm_, "    local cycle: %d contacts back in their state of two iterates ago, |R| %.3e against %.3e then\n",
+                            n, (double)fnorm, recent[0].second));
+  }
+  recent.emplace_back(now, fnorm);
+  if (recent.size() > 2) recent.pop_front();
   a->backtrack_ = cycle;  // the post-check (Backtrack) makes this step decrease |R|
   PetscFunctionReturn(0);
 }
@@ -1003,6 +1026,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
                 pp.ptc_anchor_forces);
     checked_.clear();
     history_.clear();
+    recent_.clear();
     stalled_ = false;
     PetscCall(SNESSolve(snes_, nullptr, z_));
     if (take_best_) {  // and the problem's contact data those of the best iterate
