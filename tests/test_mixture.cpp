@@ -855,13 +855,13 @@ TEST(Mixture, TwoPassWithFrictionConverges) {
     EXPECT_NEAR(problem.Pressure(), P, 1e-12 * P) << "level not reached";
     std::printf("  two-pass, friction 0.2, P/E = %g: %" PetscInt_FMT " Newton iterations, %d cuts\n", P, rep.newton_its,
                 rep.cuts);
-    const double d = problem.MeanDiameter(), c_n = 0.01;  // E = 1; c_n = ncp_scale E
+    const double d = problem.MeanDiameter(), E = problem.Parameters().young, c_n = problem.Parameters().ncp_scale * E;
     for (const ContactForce &f : problem.ContactForces()) {
       EXPECT_GE(f.gap, -1e-9 * d) << "penetration";
       // The Newton tolerance is 1e-11 E <d> on every row: the multiplier or
       // the scaled gap c_n g of each contact vanishes to it.
       EXPECT_GE(f.normal_multiplier, -1e-10 * d) << "tensile contact force";
-      EXPECT_LE(std::min(std::abs(f.normal_multiplier), c_n * std::abs(f.gap)), 1e-11 * d) << "complementarity";
+      EXPECT_LE(std::min(std::abs(f.normal_multiplier), c_n * std::abs(f.gap)), 1e-11 * E * d) << "complementarity";
       EXPECT_LE(std::abs(f.tangential_multiplier), 0.2 * f.normal_multiplier + 1e-10 * d) << "Coulomb cone";
     }
     EXPECT_NEAR(ComputeObservables(problem).mean_stress, P, 1e-3 * P);
