@@ -57,7 +57,8 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                              "", body_criterion, &body_criterion, nullptr));
   PetscCall(PetscOptionsBool("-ptc_monitor",
                              "anchored: one line per pseudo-time step (residual by block, largest unbalanced force "
-                             "and where it acts, phi, move), every failed inner solve, and the step that begins the end game",
+                             "and where it acts, phi, move), once the largest force passes the parts of the level criterion that do not, "
+                             "every failed inner solve, and the step that begins the end game",
                              "", ptc_monitor, &ptc_monitor, nullptr));
   PetscCall(PetscOptionsBool("-newton_monitor",
                              "anchored: one line per Newton iteration (|R|, closed and sliding contacts, rho_a, "
@@ -1136,6 +1137,22 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     // contact forces (P <d>), the packing fraction no longer changing, and
     // the contact conditions (Signorini, Coulomb) still satisfied exactly.
     const double f_tol = pp.level_force_rtol * pressure * dmean;
+    if (prm_.ptc_monitor && pp.level_force_rtol > 0.0 && force_residual <= f_tol) {
+      // The largest force passes: which other parts of the level criterion
+      // keep the level from being accepted.
+      std::string failing;
+      char part[96];
+      if (!settled) failing += " contact states changing;";
+      if (std::abs(phi - phi_last) > pp.level_phi_rtol * phi) failing += " phi changing;";
+      if (prm_.body_criterion) {
+        if (b.body_force > f_tol) std::snprintf(part, sizeof part, " body force %.1e P<d>;", b.body_force / (f_tol / pp.level_force_rtol)), failing += part;
+        if (b.body_torque > f_tol * dmean) std::snprintf(part, sizeof part, " body torque %.1e P<d>^2;", b.body_torque / (f_tol * dmean / pp.level_force_rtol)), failing += part;
+        const double virial = VirialDefect(p_, pressure);
+        if (virial > pp.level_force_rtol) std::snprintf(part, sizeof part, " |P_sigma/P - 1| %.1e;", virial), failing += part;
+      }
+      if (b.contact_row > atol) std::snprintf(part, sizeof part, " contact rows %.1e;", b.contact_row), failing += part;
+      PetscCall(PetscPrintf(comm_, "  ptc %3d  largest force passes; failing:%s\n", outer, failing.empty() ? " none" : failing.c_str()));
+    }
     if (settled && pp.level_force_rtol > 0.0 && force_residual <= f_tol &&
         std::abs(phi - phi_last) <= pp.level_phi_rtol * phi &&
         // and, with -level_body_criterion, the net force and torque of every
