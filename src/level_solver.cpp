@@ -1136,29 +1136,33 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     // The paper's level criterion: unbalanced forces small compared with the
     // contact forces (P <d>), the packing fraction no longer changing, and
     // the contact conditions (Signorini, Coulomb) still satisfied exactly.
-    const double f_tol = pp.level_force_rtol * pressure * dmean;
-    if (prm_.ptc_monitor && pp.level_force_rtol > 0.0 && force_residual <= f_tol) {
+    const double f_tol = pp.level_force_rtol * pressure * dmean, pd = pressure * dmean;
+    const bool force_passes = pp.level_force_rtol > 0.0 && force_residual <= f_tol;
+    const bool phi_passes = std::abs(phi - phi_last) <= pp.level_phi_rtol * phi;
+    // and, with -level_body_criterion, the net force and torque of every
+    // body and the virial identity (evaluated last, and once: it walks every contact)
+    const bool body_passes = !prm_.body_criterion || (b.body_force <= f_tol && b.body_torque <= f_tol * dmean);
+    double virial = -1.0;
+    const auto virial_passes = [&]() {
+      if (virial < 0.0) virial = VirialDefect(p_, pressure);
+      return virial <= pp.level_force_rtol;
+    };
+    if (prm_.ptc_monitor && force_passes) {
       // The largest force passes: which other parts of the level criterion
       // keep the level from being accepted.
       std::string failing;
       char part[96];
       if (!settled) failing += " contact states changing;";
-      if (std::abs(phi - phi_last) > pp.level_phi_rtol * phi) failing += " phi changing;";
+      if (!phi_passes) failing += " phi changing;";
       if (prm_.body_criterion) {
-        if (b.body_force > f_tol) std::snprintf(part, sizeof part, " body force %.1e P<d>;", b.body_force / (f_tol / pp.level_force_rtol)), failing += part;
-        if (b.body_torque > f_tol * dmean) std::snprintf(part, sizeof part, " body torque %.1e P<d>^2;", b.body_torque / (f_tol * dmean / pp.level_force_rtol)), failing += part;
-        const double virial = VirialDefect(p_, pressure);
-        if (virial > pp.level_force_rtol) std::snprintf(part, sizeof part, " |P_sigma/P - 1| %.1e;", virial), failing += part;
+        if (b.body_force > f_tol) std::snprintf(part, sizeof part, " body force %.1e P<d>;", b.body_force / pd), failing += part;
+        if (b.body_torque > f_tol * dmean) std::snprintf(part, sizeof part, " body torque %.1e P<d>^2;", b.body_torque / (pd * dmean)), failing += part;
+        if (!virial_passes()) std::snprintf(part, sizeof part, " |P_sigma/P - 1| %.1e;", virial), failing += part;
       }
       if (b.contact_row > atol) std::snprintf(part, sizeof part, " contact rows %.1e;", b.contact_row), failing += part;
       PetscCall(PetscPrintf(comm_, "  ptc %3d  largest force passes; failing:%s\n", outer, failing.empty() ? " none" : failing.c_str()));
     }
-    if (settled && pp.level_force_rtol > 0.0 && force_residual <= f_tol &&
-        std::abs(phi - phi_last) <= pp.level_phi_rtol * phi &&
-        // and, with -level_body_criterion, the net force and torque of every
-        // body and the virial identity (evaluated last: it walks every contact)
-        (!prm_.body_criterion || (b.body_force <= f_tol && b.body_torque <= f_tol * dmean &&
-                                  VirialDefect(p_, pressure) <= pp.level_force_rtol))) {
+    if (settled && force_passes && phi_passes && body_passes && (!prm_.body_criterion || virial_passes())) {
       if (b.contact_row <= atol) {
         report->relaxed = true;
         break;
