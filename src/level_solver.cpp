@@ -679,6 +679,9 @@ class AnchoredContinuation {
                                   SNESConvergedReason *reason, void *ctx);
   static PetscErrorCode Monitor(SNES snes, PetscInt it, PetscReal fnorm, void *ctx);
   static PetscErrorCode DetectCycle(SNESLineSearch, Vec, Vec, PetscBool *changed, void *ctx);
+  // Contacts back in their state of two iterates ago while |R| (fnorm now)
+  // has not halved over those two iterations: a local active-set cycle.
+  int ContactsBack(const std::vector<char> &now, double fnorm) const;
   static PetscErrorCode Backtrack(SNESLineSearch ls, Vec X, Vec Y, Vec W, PetscBool *changed_Y, PetscBool *changed_W,
                                   void *ctx);
 
@@ -792,6 +795,32 @@ PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal
   // level criterion (Solve); a state short of them is the anchor of the
   // next pseudo-time step. SNES's -snes_rtol, if larger, applies instead.
   const PetscReal forcing = a->p_.AnchorWeight() > 0.0 ? kInnerForcing : 0.0;
+  // A local active-set cycle (DetectCycle) at an iterate that is a static
+  // equilibrium of its contacts: contacts whose force sits on the Coulomb
+  // cone flip stick <-> slip at every iteration; the sliding iterate has the
+  // force on the cone and a slip since the anchor that points along the
+  // force (not a Coulomb increment, so this pseudo-time step has no solution
+  // near it), and the sticking one the slip back at 0 with the force beyond
+  // the cone. Measured from the sliding iterate itself, its contact rows are
+  // exact: the inner solve ends there and the next pseudo-time step starts
+  // from it. Backtracked instead, each pseudo-time step halves the slip and
+  // the level creeps to the same state (docs/level-solver-measurements.md,
+  // "Measured: a pseudo-time step ended at a static state of a cycle").
+  bool end_here = false;
+  if (it > 0 && a->p_.AnchorWeight() > 0.0 && a->ContactsBack(now, fnorm) > 0) {
+    Vec x;
+    PetscCall(SNESGetSolution(snes, &x));
+    PetscCall(a->p_.ResidualFromHere(x, a->work_));
+    PetscReal here;
+    PetscCall(VecNorm(a->work_, NORM_2, &here));
+    CompactionProblem::Balance b;
+    PetscCall(a->p_.BodyBalance(a->work_, &b));
+    end_here = b.contact_row <= atol && here < fnorm;
+    if (end_here && a->prm_.ptc_monitor)
+      PetscCall(PetscPrintf(a->comm_, "    local cycle at newton %" PetscInt_FMT ": contact rows exact with the slip from here (|R| %.3e), the pseudo-time step ends here\n",
+                            it, (double)here));
+    if (!end_here) PetscCall(a->p_.Residual(x, a->work_));  // the contact states of this iterate, for DetectCycle
+  }
   if (PetscIsInfOrNanReal(fnorm)) {
     *reason = SNES_DIVERGED_FNORM_NAN;
   } else if (fnorm <= std::max<PetscReal>(atol, std::max<PetscReal>(rtol, forcing) * a->fnorm0_) &&
@@ -808,6 +837,10 @@ PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal
     // moves the share, flipping weakly loaded nodes (lambda_n ~ 1e-10 E<d>)
     // between open, stick and slip forever.
     *reason = SNES_CONVERGED_FNORM_ABS;
+  } else if (end_here) {
+    a->stalled_ = true;
+    a->take_best_ = false;
+    *reason = SNES_CONVERGED_ITS;
   } else if (it >= maxit) {
     *reason = SNES_DIVERGED_MAX_IT;
   } else if (a->p_.AnchorWeight() > 0.0 && it >= a->p_.Parameters().ptc_stall_its) {
@@ -871,6 +904,15 @@ PetscErrorCode AnchoredContinuation::Monitor(SNES snes, PetscInt it, PetscReal f
   PetscFunctionReturn(0);
 }
 
+int AnchoredContinuation::ContactsBack(const std::vector<char> &now, double fnorm) const {
+  if (recent_.size() != 2 || !(fnorm > 0.5 * recent_[0].second) || recent_[0].first.size() != now.size() ||
+      recent_[1].first.size() != now.size())
+    return 0;
+  int n = 0;
+  for (size_t c = 0; c < now.size(); ++c) n += now[c] == recent_[0].first[c] && now[c] != recent_[1].first[c];
+  return n;
+}
+
 // Line-search pre-check, which leaves the Newton step as it is (full steps
 // inside a pseudo-time step: a cap on the move of a body per step and the
 // contact step fraction, measured together, took as many iterations as
@@ -908,10 +950,8 @@ PetscErrorCode AnchoredContinuation::DetectCycle(SNESLineSearch ls, Vec, Vec, Pe
   PetscCall(SNESLineSearchGetNorms(ls, &xnorm, &fnorm, &ynorm));
   const std::vector<char> &now = a->p_.ActiveSet();
   std::deque<std::pair<std::vector<char>, double>> &recent = a->recent_;
-  if (!cycle && recent.size() == 2 && fnorm > 0.5 * recent[0].second && recent[0].first.size() == now.size() &&
-      recent[1].first.size() == now.size()) {
-    int n = 0;
-    for (size_t c = 0; c < now.size(); ++c) n += now[c] == recent[0].first[c] && now[c] != recent[1].first[c];
+  if (!cycle) {
+    const int n = a->ContactsBack(now, fnorm);
     cycle = n > 0;
     if (cycle && a->prm_.ptc_monitor)
       PetscCall(PetscPrintf(a->comm_, "    local cycle: %d contacts back in their state of two iterates ago, |R| %.3e against %.3e then\n",
@@ -1079,6 +1119,12 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       PetscFunctionReturn(0);
     }
     PetscCall(p_.AdoptState(z_));
+    // The level is tested with the slip measured from here (so are the next
+    // pseudo-time step's rows): its contact rows are then the static
+    // conditions, the tangential force within the Coulomb cone and on it
+    // where the contact slides, which every state the test accepted with the
+    // slip from the anchor meets too.
+    if (ptc) p_.MarkStepStart();
     bool stale = false;
     PetscCall(p_.CandidatesStale(&stale));
     if (stale && (ptc || refresh < 5)) {
@@ -1089,7 +1135,6 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     }
     if (!ptc) break;
     // Equilibrium test without the pseudo-transient term.
-    const std::vector<char> active_inner = p_.ActiveSet();
     p_.SetAnchor(0.0);
     PetscCall(Attach());
     PetscReal true_norm;
@@ -1115,7 +1160,10 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
                             stale ? "  (candidates refreshed)" : ""));
     }
     report->force_residual = force_residual;
-    const bool settled = !stale && p_.ActiveSet() == active_inner;
+    // The contact states of the test are those of this state (the anchor
+    // term changes residual values only): they change between pseudo-time
+    // steps only with the candidate list.
+    const bool settled = !stale;
     // The parts of the level criterion other than |F|_inf, on the heartbeat
     // line, so that a long sub-step says what keeps it from being accepted.
     bool due = false;

@@ -1057,6 +1057,22 @@ PetscErrorCode CompactionProblem::AdoptState(Vec z) {
   PetscFunctionReturn(0);
 }
 
+PetscErrorCode CompactionProblem::ResidualFromHere(Vec z, Vec F) {
+  const PetscScalar *za;
+  PetscFunctionBeginUser;
+  const std::vector<double> start = u_start_;
+  const double rho = rho_anchor_;
+  PetscCall(Gather(z, true));
+  PetscCall(VecGetArrayRead(zall_, &za));
+  u_start_.assign(za, za + n_body_dofs_);
+  PetscCall(VecRestoreArrayRead(zall_, &za));
+  rho_anchor_ = 0.0;
+  PetscCall(Residual(z, F));
+  u_start_ = start;
+  rho_anchor_ = rho;
+  PetscFunctionReturn(0);
+}
+
 namespace {
 
 // The rigid part of a deformable body's step d at positions X + z (both

@@ -43,7 +43,7 @@ Cases
                     line of each sub-step counts its Newton iterations, and per
                     level they add up to curve.csv's newton_its; with
                     -progress_interval -1 there are none
-  end-game          50 disks, kappa 0.5, friction 0.2 to P/E 3e-3 with -ptc_monitor: the
+  end-game          50 disks, kappa 0.2, friction 0.2 to P/E 0.03 with -ptc_monitor: the
                     end game of anchored (all of the level criterion but the contact rows
                     passes) begins on some level, and no inner solve fails after it has
                     begun (rho_a held at least at its value then)

@@ -226,6 +226,60 @@ TEST(Mixture, MortarFrictionalJacobianMatchesFiniteDifferences) {
   CheckJacobian(Lattice(2, 0.4, [](int, int) { return true; }, true, 40), "frictional mortar lattice");
 }
 
+// ResidualFromHere: the residual at z with the slip measured from z and no
+// anchor term, as the first residual of a pseudo-time step anchored at z;
+// the problem's slip reference and anchor are left as they were.
+TEST(Mixture, ResidualFromHereMeasuresTheSlipFromTheIterate) {
+  auto problem = Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; });
+  ASSERT_TRUE(problem);
+  LoadControlParameters load;
+  double step = -1.0;
+  LevelReport rep;
+  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.02, &step, &rep));
+  problem->MarkStepStart();
+  problem->SetAnchor(1.0, true);
+  Vec z, F0, F1, F2, F3;
+  ASSERT_PETSC(problem->CreateGlobalVector(&z));
+  ASSERT_PETSC(problem->PackState(z));
+  PetscInt n;
+  ASSERT_PETSC(VecGetSize(z, &n));
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  PetscScalar *za;
+  ASSERT_PETSC(VecGetArray(z, &za));
+  for (PetscInt i = 0; i < n; ++i) za[i] += 1e-5 * U(rng);
+  ASSERT_PETSC(VecRestoreArray(z, &za));
+  for (Vec *v : {&F0, &F1, &F2, &F3}) ASSERT_PETSC(VecDuplicate(z, v));
+  ASSERT_PETSC(problem->EvaluateResidual(z, F0));  // anchored, slip from the converged state
+  ASSERT_PETSC(problem->ResidualFromHere(z, F1));
+  ASSERT_PETSC(problem->EvaluateResidual(z, F2));  // the anchor and the slip reference as before
+  // The same from a pseudo-time step begun at z: slip from z, no anchor.
+  ASSERT_PETSC(problem->AdoptState(z));
+  problem->MarkStepStart();
+  problem->SetAnchor(0.0);
+  ASSERT_PETSC(problem->EvaluateResidual(z, F3));
+  auto max_difference = [](Vec a, Vec b) {
+    const PetscScalar *x, *y;
+    PetscInt m;
+    double d = 0.0;
+    VecGetLocalSize(a, &m);
+    VecGetArrayRead(a, &x);
+    VecGetArrayRead(b, &y);
+    for (PetscInt i = 0; i < m; ++i) d = std::max(d, std::abs(x[i] - y[i]));
+    VecRestoreArrayRead(a, &x);
+    VecRestoreArrayRead(b, &y);
+    return d;
+  };
+  PetscReal norm0;
+  ASSERT_PETSC(VecNorm(F0, NORM_INFINITY, &norm0));
+  const double changed = max_difference(F0, F1), restored = max_difference(F0, F2), same = max_difference(F1, F3);
+  std::printf("|F0| %.3e, |F0 - F_here| %.3e, after it %.3e, against a step begun at z %.3e\n", norm0, changed, restored, same);
+  EXPECT_GT(changed, 1e-3 * norm0);  // the anchor term and the slips since the converged state are gone
+  EXPECT_EQ(restored, 0.0);
+  EXPECT_EQ(same, 0.0);
+  for (Vec *v : {&z, &F0, &F1, &F2, &F3}) VecDestroy(v);
+}
+
 // The dual proximal term of anchored's end game (SetDualRegularization): it
 // is the multiplier diagonal of the Newton matrix and nothing else, it cannot
 // exceed prox_eta, and it lasts until the load step ends.

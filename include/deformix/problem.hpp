@@ -461,6 +461,12 @@ class CompactionProblem {
   // Makes the current state the reference of the incremental slip: the
   // start of the load step, or of a pseudo-time step (level_solver.hpp).
   void MarkStepStart() { u_start_ = u_; }
+  // The residual at z (no anchor term) with the slip measured from z itself,
+  // as the first residual of a pseudo-time step anchored at z would be: its
+  // contact rows are the static conditions (Signorini, the tangential force
+  // within the Coulomb cone). The slip reference and the anchor are left as
+  // they were; the contact states are those of this evaluation. Collective.
+  PetscErrorCode ResidualFromHere(Vec z, Vec F);
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
   // Candidates within margin x <d> at the current state: all of them (gathered
   // on every rank; collective), or those found by this rank's narrow phase
