@@ -137,27 +137,36 @@ TEST(Mixture, AllDeformableLatticeUsesNodeSegmentContacts) {
 // differences; with rho > 0 the pseudo-transient anchor's terms (on bodies,
 // walls and contact forces: SetAnchor) are in the residual and must be in the
 // Jacobian.
-void CheckJacobian(std::unique_ptr<CompactionProblem> problem, const char *label, double rho = 0.0) {
-  ASSERT_TRUE(problem);
+// The lattice converged at P/E 0.02, a new load step opened there (the slip
+// measured from the converged state) with the anchor weight rho, and in z
+// that state with every unknown (multipliers included) perturbed by up to
+// `amplitude` at random.
+void PerturbedConvergedState(CompactionProblem &problem, double rho, double amplitude, unsigned seed, Vec *z) {
   LoadControlParameters load;
   double step = -1.0;
   LevelReport rep;
-  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.02, &step, &rep));
-  // Open a new load step so that the slip is measured from the converged state.
-  problem->MarkStepStart();
-  problem->SetAnchor(rho, true);
-  Vec z, F, Fp, Fm;
-  ASSERT_PETSC(problem->CreateGlobalVector(&z));
-  ASSERT_PETSC(problem->PackState(z));
+  ASSERT_PETSC(AdvanceToPressure(problem, load, 0.02, &step, &rep));
+  problem.MarkStepStart();
+  problem.SetAnchor(rho, true);
+  ASSERT_PETSC(problem.CreateGlobalVector(z));
+  ASSERT_PETSC(problem.PackState(*z));
   PetscInt n;
-  ASSERT_PETSC(VecGetSize(z, &n));
-  // A small random perturbation of every unknown (multipliers included).
-  std::mt19937_64 rng(7);
+  ASSERT_PETSC(VecGetSize(*z, &n));
+  std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> U(-1.0, 1.0);
   PetscScalar *za;
-  ASSERT_PETSC(VecGetArray(z, &za));
-  for (PetscInt i = 0; i < n; ++i) za[i] += 1e-6 * U(rng);
-  ASSERT_PETSC(VecRestoreArray(z, &za));
+  ASSERT_PETSC(VecGetArray(*z, &za));
+  for (PetscInt i = 0; i < n; ++i) za[i] += amplitude * U(rng);
+  ASSERT_PETSC(VecRestoreArray(*z, &za));
+}
+
+void CheckJacobian(std::unique_ptr<CompactionProblem> problem, const char *label, double rho = 0.0) {
+  ASSERT_TRUE(problem);
+  Vec z = nullptr, F, Fp, Fm;
+  PerturbedConvergedState(*problem, rho, 1e-6, 7, &z);
+  ASSERT_TRUE(z);
+  PetscInt n;
+  ASSERT_PETSC(VecGetSize(z, &n));
   ASSERT_PETSC(VecDuplicate(z, &F));
   ASSERT_PETSC(VecDuplicate(z, &Fp));
   ASSERT_PETSC(VecDuplicate(z, &Fm));
@@ -232,23 +241,9 @@ TEST(Mixture, MortarFrictionalJacobianMatchesFiniteDifferences) {
 TEST(Mixture, ResidualFromHereMeasuresTheSlipFromTheIterate) {
   auto problem = Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; });
   ASSERT_TRUE(problem);
-  LoadControlParameters load;
-  double step = -1.0;
-  LevelReport rep;
-  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.02, &step, &rep));
-  problem->MarkStepStart();
-  problem->SetAnchor(1.0, true);
-  Vec z, F0, F1, F2, F3;
-  ASSERT_PETSC(problem->CreateGlobalVector(&z));
-  ASSERT_PETSC(problem->PackState(z));
-  PetscInt n;
-  ASSERT_PETSC(VecGetSize(z, &n));
-  std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
-  PetscScalar *za;
-  ASSERT_PETSC(VecGetArray(z, &za));
-  for (PetscInt i = 0; i < n; ++i) za[i] += 1e-5 * U(rng);
-  ASSERT_PETSC(VecRestoreArray(z, &za));
+  Vec z = nullptr, F0, F1, F2, F3;
+  PerturbedConvergedState(*problem, 1.0, 1e-5, 11, &z);
+  ASSERT_TRUE(z);
   for (Vec *v : {&F0, &F1, &F2, &F3}) ASSERT_PETSC(VecDuplicate(z, v));
   ASSERT_PETSC(problem->EvaluateResidual(z, F0));  // anchored, slip from the converged state
   ASSERT_PETSC(problem->ResidualFromHere(z, F1));
