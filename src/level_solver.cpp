@@ -1174,10 +1174,10 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       if (phi_last > 0.0) std::snprintf(change, sizeof change, "%.1e", std::abs(phi - phi_last) / phi);
       std::snprintf(parts, sizeof parts,
                     ", largest body force %.1e (particle %d, %s) and torque %.1e P<d>(^2), |P_sigma/P - 1| %.1e, largest "
-                    "contact row %.1e (exact below %.0e), contact states %s, phi change %s",
+                    "contact row %.1e (exact below %.0e), contact candidates %s, phi change %s",
                     b.body_force / pd, b.body_force_particle, b.body_force_deformable ? "deformable" : "rigid",
                     b.body_torque / (pd * dmean), VirialDefect(p_, pressure), b.contact_row, atol,
-                    settled ? "settled" : "changing", change);
+                    settled ? "kept" : "refreshed", change);
       PetscCall(progress_.Print(comm_, pressure, steps_before + outer + 1, report->newton_its, force_residual, parts));
     }
     if (settled && true_norm <= atol) break;  // exact equilibrium
@@ -1200,7 +1200,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       // keep the level from being accepted.
       std::string failing;
       char part[96];
-      if (!settled) failing += " contact states changing;";
+      if (!settled) failing += " contact candidates refreshed;";
       if (!phi_passes) failing += " phi changing;";
       if (prm_.body_criterion) {
         if (b.body_force > f_tol) std::snprintf(part, sizeof part, " body force %.1e P<d>;", b.body_force / pd), failing += part;
