@@ -27,12 +27,12 @@ static const char help[] =
     "level, with the contact network) and levels.xdmf beside it (open it in ParaView: a time series\n"
     "over the levels), <output_dir>/packing.csv (the initial packing) and <output_dir>/checkpoint.h5 (after\n"
     "every level, and after the frictionless settling of the first: what -restart needs to continue the run\n"
-    "exactly where it stopped).\n\n"
+    "exactly where it stopped; -checkpoint_levels true keeps checkpoint_level_<k>.h5 of every level k besides).\n\n"
     "Examples:\n"
     "  build/bin/compact -options_file petsc-options/default.opts     (20 disks, a few seconds)\n"
     "  build/bin/compact -n_particles 64 -kappa 0.5 -friction 0.2 -pressures 1e-4,1e-3 -output_dir out/c64\n"
     "  build/bin/compact -options_file petsc-options/paper.opts -kappa 0.8 -friction 0.2 -constrain_rotation true\n"
-    "      (1500 disks: hours per curve)\n"
+    "      (1500 disks: about 40 minutes per curve on 2 ranks)\n"
     "  build/bin/compact -options_file petsc-options/default.opts -pressures 1e-4,1e-3,3e-3,0.01,0.02,0.03,0.05 \\\n"
     "      -restart out/compact/checkpoint.h5      (continue the default scene by one more level)\n\n"
     "PETSc solver options apply as usual (-snes_*, -ksp_*, -pc_*, -log_view; -settle_snes_*, -settle_ksp_*,\n"
@@ -78,6 +78,7 @@ struct CompactOptions {
   PetscBool settle_frictionless = PETSC_TRUE;
   PetscBool settle_rigid = PETSC_TRUE;
   PetscBool checkpoint = PETSC_TRUE;
+  PetscBool checkpoint_levels = PETSC_FALSE;
   std::string restart;  // checkpoint to continue from ("" : a new run)
   std::string packing;  // user packing (CSV) instead of the generated one ("" : generate)
 };
@@ -129,7 +130,7 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, CompactOptions *o) {
   const std::vector<double> defaults = {1e-4, 1e-3, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5};
   PetscCall(GetPressureList(comm, defaults, &o->pressures));
   PetscCall(GetOutputDirectory(comm, "out/compact", &o->output_dir));
-  PetscCall(GetRestartOptions(comm, &o->restart, &o->checkpoint));
+  PetscCall(GetRestartOptions(comm, &o->restart, &o->checkpoint, &o->checkpoint_levels));
   PetscFunctionReturn(0);
 }
 
@@ -470,7 +471,9 @@ PetscErrorCode Run(MPI_Comm comm) {
 
   // 3. Levels: solve, measure, write.
   LevelOutputs outputs;
-  PetscCall(outputs.Open(comm, {opts.output_dir, bool(opts.write_hdf5), bool(opts.checkpoint)}, kCurveColumns,
+  PetscCall(outputs.Open(comm,
+                         {opts.output_dir, bool(opts.write_hdf5), bool(opts.checkpoint), bool(opts.checkpoint_levels)},
+                         kCurveColumns,
                          restarting ? &restart : nullptr));
   PetscCall(PetscPrintf(comm, "  %9s %8s %6s %6s %10s %8s %7s %6s %6s %8s\n", "P/E", "phi", "Z", "Z_nr", "P_sig/P",
                         "K/E", "slide", "newton", "steps", "seconds"));

@@ -46,6 +46,7 @@ struct SingleParticleOptions {
   std::string output_dir;
   PetscBool write_hdf5 = PETSC_TRUE;
   PetscBool checkpoint = PETSC_TRUE;
+  PetscBool checkpoint_levels = PETSC_FALSE;
   std::string restart;  // checkpoint to continue from ("": a new run)
 };
 
@@ -73,7 +74,7 @@ PetscErrorCode ProcessOptions(MPI_Comm comm, SingleParticleOptions *o) {
   const std::vector<double> defaults = {1e-4, 1e-3, 5e-3, 0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5};
   PetscCall(GetPressureList(comm, defaults, &o->pressures));
   PetscCall(GetOutputDirectory(comm, "out/single-particle", &o->output_dir));
-  PetscCall(GetRestartOptions(comm, &o->restart, &o->checkpoint));
+  PetscCall(GetRestartOptions(comm, &o->restart, &o->checkpoint, &o->checkpoint_levels));
   PetscFunctionReturn(0);
 }
 
@@ -142,7 +143,9 @@ PetscErrorCode Run(MPI_Comm comm) {
 
   // 3. Levels: solve, measure, write.
   LevelOutputs outputs;
-  PetscCall(outputs.Open(comm, {opts.output_dir, bool(opts.write_hdf5), bool(opts.checkpoint)}, kCurveColumns,
+  PetscCall(outputs.Open(comm,
+                         {opts.output_dir, bool(opts.write_hdf5), bool(opts.checkpoint), bool(opts.checkpoint_levels)},
+                         kCurveColumns,
                          restarting ? &restart : nullptr));
   PetscCall(PetscPrintf(comm, "  %10s %10s %10s %6s %6s %9s\n", "P/E", "phi_p", "area_ratio", "newton", "steps",
                         "seconds"));

@@ -39,6 +39,12 @@ levels from the same state, a paired comparison (bit for bit repeatable
 on one rank; on two, MUMPS' parallel factorization differs in its last
 digits from run to run, docs/parallel.md, and a whole curve from its
 settling is one sample of its path).
+--restart-levels DIR solves every level of a run on its own, from the
+checkpoint of the level before it in DIR (checkpoint_level_<k>.h5 of a
+reference run with compact -checkpoint_levels true; its curve.csv gives the
+pressures): every strategy then starts every level from the same state, so
+a difference on one level does not carry over to the path of the next
+(the levels of DIR's curve after its first checkpoint, one run each).
 --reuse reads the runs that an earlier invocation with the same arguments
 left in --runs (their curve.csv and log.txt) instead of running them.
 
@@ -47,6 +53,7 @@ Usage:
   /usr/bin/python3 scripts/bench_solver.py --scenes default campaign50 --pressures 1e-4,3e-4,1e-3,3e-3,0.01,0.02,0.05 --jobs 2
   /usr/bin/python3 scripts/bench_solver.py --strategies anchored/whole anchored/adaptive newton/whole newton/adaptive
   /usr/bin/python3 scripts/bench_solver.py --scenes paper1500 --ranks 1 --jobs 2 --strategies auto --baseline OLD/compact --restart CHECKPOINT
+  /usr/bin/python3 scripts/bench_solver.py --scenes paper1500 --ranks 1 --jobs 2 --strategies auto --baseline OLD/compact --restart-levels REFDIR
 """
 import argparse
 import concurrent.futures as cf
@@ -110,8 +117,31 @@ def scene_runs(a):
     return runs
 
 
-def run_one(a, scene, label, ranks, opts, strategy):
-    out = os.path.join(a.runs, f"{label}_" + "".join(c if c.isalnum() or c in "._" else "_" for c in strategy))
+def level_starts(a):
+    """[(tag, checkpoint, pressures)] of --restart-levels: level k + 1 of the
+    reference curve from its checkpoint_level_<k>.h5, with -pressures up to it."""
+    curve = os.path.join(a.restart_levels, "curve.csv")
+    if not os.path.exists(curve):
+        sys.exit(f"--restart-levels {a.restart_levels}: no curve.csv (the directory of a compact run with "
+                 "-checkpoint_levels true)")
+    with open(curve) as f:
+        pressures = [float(r["P_over_E"]) for r in csv.DictReader(f)]
+    starts = []
+    for k in range(len(pressures) - 1):
+        path = os.path.join(a.restart_levels, f"checkpoint_level_{k:04d}.h5")
+        if os.path.exists(path):
+            starts.append((f"_L{k + 1:02d}", path, ",".join(repr(p) for p in pressures[:k + 2])))
+    if not starts:
+        sys.exit(f"--restart-levels {a.restart_levels}: no checkpoint_level_<k>.h5 before its last level")
+    return starts
+
+
+def run_one(a, scene, label, ranks, opts, strategy, start=("", "", "")):
+    tag, restart, pressures = start
+    restart = restart or a.restart
+    if pressures:
+        opts = opts + ["-pressures", pressures]
+    out = os.path.join(a.runs, f"{label}{tag}_" + "".join(c if c.isalnum() or c in "._" else "_" for c in strategy))
     os.makedirs(out, exist_ok=True)
     env = None
     if strategy == "baseline":
@@ -126,7 +156,7 @@ def run_one(a, scene, label, ranks, opts, strategy):
         mpi += [x for kv in a.baseline_env for x in ("-x", kv.split("=", 1)[0])]
     cmd = mpi + \
           [exe] + opts + solver + ["-output_dir", out, "-checkpoint", "false"] + a.extra.split() + \
-          (["-restart", a.restart] if a.restart else [])
+          (["-restart", restart] if restart else [])
     log = os.path.join(out, "log.txt")
     t0 = time.time()
     if a.reuse:
@@ -243,6 +273,8 @@ def main():
     ap.add_argument("--mpiexec", default="mpiexec")
     ap.add_argument("--extra", default="", help="extra compact options for every run")
     ap.add_argument("--restart", default="", help="checkpoint every run starts from (compact -restart)")
+    ap.add_argument("--restart-levels", default="", metavar="DIR",
+                    help="solve every level on its own from DIR/checkpoint_level_<k>.h5 (compact -checkpoint_levels true)")
     ap.add_argument("--reuse", action="store_true", help="read the runs left in --runs instead of running them")
     ap.add_argument("--runs", default=os.path.join(ROOT, "out", "bench_solver"))
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "solver"))
@@ -256,15 +288,19 @@ def main():
             sys.exit(f"--only {' '.join(sorted(unknown))}: not a run of --scenes {' '.join(a.scenes)}")
         runs = [r for r in runs if r[1] in a.only]
     rows = []
-    jobs = [(scene, label, ranks, opts, s) for scene, label, ranks, opts in runs for s in a.strategies]
+    if a.restart_levels and a.restart:
+        sys.exit("--restart and --restart-levels exclude each other")
+    starts = level_starts(a) if a.restart_levels else [("", "", "")]
+    jobs = [(scene, label, ranks, opts, s, st) for scene, label, ranks, opts in runs for st in starts for s in a.strategies]
     with cf.ThreadPoolExecutor(max_workers=a.jobs) as pool:
         futs = {pool.submit(run_one, a, *j): j for j in jobs}
         for f in cf.as_completed(futs):
-            scene, label, ranks, opts, s = futs[f]
+            scene, label, ranks, opts, s, st = futs[f]
             status, wall, r = f.result()
-            status_of[(label, s)] = status
+            if status_of.get((label, s), "ok") == "ok":  # a run of several levels: its first failure
+                status_of[(label, s)] = status
             rows += r
-            print(f"  {label} {s}: {status}, {len(r)} levels, {sum(x['newton_its'] for x in r)} Newton its, "
+            print(f"  {label}{st[0]} {s}: {status}, {len(r)} levels, {sum(x['newton_its'] for x in r)} Newton its, "
                   f"{wall:.0f} s", flush=True)
     order = {label: i for i, (_, label, _, _) in enumerate(runs)}
     rows.sort(key=lambda x: (order[x["run"]], a.strategies.index(x["strategy"]), x["P_over_E"]))

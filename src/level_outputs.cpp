@@ -1,5 +1,7 @@
 #include "deformix/level_outputs.hpp"
 
+#include <cstdio>
+
 #include "deformix/xdmf.hpp"
 
 namespace deformix {
@@ -19,6 +21,15 @@ PetscErrorCode LevelOutputs::Open(MPI_Comm comm, const Files &files, const std::
   } else {
     PetscCall(RemoveFile(comm, h5));
     PetscCall(RemoveFile(comm, XdmfPathOf(h5)));
+  }
+  // Nor may its level checkpoints beyond this run's start: an earlier run wrote
+  // them from some level on without gaps.
+  if (files.checkpoint_levels) {
+    PetscMPIInt rank;
+    PetscCallMPI(MPI_Comm_rank(comm, &rank));
+    if (rank == 0)
+      for (size_t k = rows_.size(); std::remove(LevelCheckpointPath(k).c_str()) == 0; ++k) {
+      }
   }
   PetscFunctionReturn(0);
 }
@@ -42,6 +53,10 @@ PetscErrorCode LevelOutputs::Level(size_t level, const std::vector<double> &pres
     c.columns = columns_;
     PetscCall(WriteLevelCheckpoint(comm_, files_.dir + "/checkpoint.h5", pressures, level, rows_, load_step, problem, &c));
   }
+  if (files_.checkpoint_levels) {
+    c.columns = columns_;
+    PetscCall(WriteLevelCheckpoint(comm_, LevelCheckpointPath(level), pressures, level, rows_, load_step, problem, &c));
+  }
   PetscFunctionReturn(0);
 }
 
@@ -58,9 +73,15 @@ PetscErrorCode LevelOutputs::MidLevelCheckpoint(const std::vector<double> &press
   PetscFunctionReturn(0);
 }
 
+std::string LevelOutputs::LevelCheckpointPath(size_t level) const {
+  char name[48];
+  std::snprintf(name, sizeof(name), "/checkpoint_level_%04zu.h5", level);
+  return files_.dir + name;
+}
+
 std::string LevelOutputs::Written() const {
   return "curve.csv" + std::string(files_.hdf5 ? ", levels.h5, levels.xdmf" : "") +
-         (files_.checkpoint ? ", checkpoint.h5" : "");
+         (files_.checkpoint ? ", checkpoint.h5" : "") + (files_.checkpoint_levels ? ", checkpoint_level_*.h5" : "");
 }
 
 }  // namespace deformix

@@ -58,13 +58,18 @@ PetscErrorCode GetOutputDirectory(MPI_Comm comm, const std::string &fallback, st
   PetscFunctionReturn(0);
 }
 
-PetscErrorCode GetRestartOptions(MPI_Comm comm, std::string *restart, PetscBool *checkpoint) {
+PetscErrorCode GetRestartOptions(MPI_Comm comm, std::string *restart, PetscBool *checkpoint,
+                                 PetscBool *checkpoint_levels) {
   char buf[PETSC_MAX_PATH_LEN] = "";
   PetscBool set = PETSC_FALSE;
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Checkpoints", "deformix");
   PetscCall(PetscOptionsBool("-checkpoint", "write <output_dir>/checkpoint.h5 after every level (for -restart)", "",
                              *checkpoint, checkpoint, nullptr));
+  PetscCall(PetscOptionsBool("-checkpoint_levels",
+                             "also keep <output_dir>/checkpoint_level_<k>.h5 after every level k = 0, 1, ... (-restart "
+                             "from any level of the run, e.g. to solve one level again with other solver options)",
+                             "", *checkpoint_levels, checkpoint_levels, nullptr));
   PetscCall(PetscOptionsString("-restart",
                                "continue the run saved in this checkpoint.h5: the scene options must be the same and its "
                                "levels the first ones of -pressures",

@@ -136,8 +136,10 @@ def restart_case(driver, workdir, mpiexec):
     full, part = os.path.join(workdir, "full"), os.path.join(workdir, "part")
     for d in (full, part):
         shutil.rmtree(d, ignore_errors=True)
-    rc, _ = compact(driver, full, levels)
+    rc, _ = compact(driver, full, levels, extra=["-checkpoint_levels", "true"])
     check(rc == 0, f"three-level run: exit code {rc}")
+    kept = sorted(f for f in os.listdir(full) if f.startswith("checkpoint_level_"))
+    check(kept == [f"checkpoint_level_{k:04d}.h5" for k in range(3)], f"-checkpoint_levels keeps one per level: {kept}")
     rc, _ = compact(driver, part, levels[:2])
     check(rc == 0 and os.path.exists(os.path.join(part, "checkpoint.h5")), "two-level run writes checkpoint.h5")
     two_levels = os.path.join(workdir, "two-levels.h5")
@@ -147,6 +149,21 @@ def restart_case(driver, workdir, mpiexec):
     a = read_curve(full)
     check(len(a) == 3, f"uninterrupted curve has {len(a)} rows (3)")
     compare_runs(full, part)
+
+    # The third level again from the second level's own checkpoint, in a copy of
+    # the run's directory: the same level bit for bit, and the level checkpoints
+    # of the earlier run beyond the restart are replaced (a stale fourth one goes).
+    again = os.path.join(workdir, "again")
+    shutil.rmtree(again, ignore_errors=True)
+    shutil.copytree(full, again)
+    stale = os.path.join(again, "checkpoint_level_0003.h5")
+    shutil.copy(os.path.join(again, "checkpoint_level_0002.h5"), stale)
+    rc, _ = compact(driver, again, levels,
+                    extra=["-checkpoint_levels", "true", "-restart", os.path.join(full, "checkpoint_level_0001.h5")])
+    check(rc == 0, f"restart from checkpoint_level_0001.h5: exit code {rc}")
+    compare_runs(full, again)
+    check(not os.path.exists(stale) and os.path.exists(os.path.join(again, "checkpoint_level_0002.h5")),
+          "the restarted run rewrites checkpoint_level_0002.h5 and removes the earlier run's checkpoint_level_0003.h5")
 
     # On two ranks (METIS partition, distributed MUMPS): the same curve to solver tolerance.
     two = os.path.join(workdir, "two-ranks")

@@ -23,6 +23,7 @@ class LevelOutputs {
     std::string dir;                 // output directory
     bool hdf5 = true;                // levels.h5 and levels.xdmf
     bool checkpoint = true;          // checkpoint.h5
+    bool checkpoint_levels = false;  // checkpoint_level_<k>.h5 of every level k
   };
   // Opens curve.csv with `columns`; restart: the checkpoint being continued
   // (nullptr for a new run).
@@ -33,7 +34,8 @@ class LevelOutputs {
   // Writes level `level` (P/E = pressures[level]) just solved: its curve row,
   // which must name every column and nothing else, its state in levels.h5,
   // and the checkpoint, which `c` describes (driver, scene, packing, values)
-  // and which is completed with the curve, the load step and the state.
+  // and which is completed with the curve, the load step and the state
+  // (checkpoint.h5, and checkpoint_level_<level>.h5 with checkpoint_levels).
   PetscErrorCode Level(size_t level, const std::vector<double> &pressures, const std::map<std::string, double> &row,
                        double load_step, const CompactionProblem &problem, Checkpoint c);
   // A checkpoint inside level LevelsDone() (compact: after its frictionless
@@ -42,6 +44,8 @@ class LevelOutputs {
                                     const CompactionProblem::Snapshot &state, Checkpoint c);
   // Where the checkpoints go ("" with checkpoints off).
   std::string CheckpointPath() const { return files_.checkpoint ? files_.dir + "/checkpoint.h5" : ""; }
+  // checkpoint_level_<level>.h5 in the output directory.
+  std::string LevelCheckpointPath(size_t level) const;
   // "curve.csv, levels.h5, checkpoint.h5": what the run writes.
   std::string Written() const;
 

@@ -15,9 +15,11 @@ PetscErrorCode GetPressureList(MPI_Comm comm, const std::vector<double> &default
 // Reads -output_dir.
 PetscErrorCode GetOutputDirectory(MPI_Comm comm, const std::string &fallback, std::string *dir);
 
-// Reads -restart FILE (a checkpoint to continue from; "" when not given) and
-// -checkpoint (write <output_dir>/checkpoint.h5 after every level).
-PetscErrorCode GetRestartOptions(MPI_Comm comm, std::string *restart, PetscBool *checkpoint);
+// Reads -restart FILE (a checkpoint to continue from; "" when not given),
+// -checkpoint (write <output_dir>/checkpoint.h5 after every level) and
+// -checkpoint_levels (keep a checkpoint of every level besides).
+PetscErrorCode GetRestartOptions(MPI_Comm comm, std::string *restart, PetscBool *checkpoint,
+                                 PetscBool *checkpoint_levels);
 
 // Creates the directory (and parents) and checks that a file can be written
 // in it, without touching any existing file. Collective; errors on every rank.
