@@ -40,11 +40,14 @@ on one rank; on two, MUMPS' parallel factorization differs in its last
 digits from run to run, docs/parallel.md, and a whole curve from its
 settling is one sample of its path).
 --restart-levels DIR solves every level of a run on its own, from the
-checkpoint of the level before it in DIR (checkpoint_level_<k>.h5 of a
-reference run with compact -checkpoint_levels true; its curve.csv gives the
+checkpoint of the level before it (checkpoint_level_<k>.h5 of a reference
+run with compact -checkpoint_levels true; its curve.csv gives the
 pressures): every strategy then starts every level from the same state, so
 a difference on one level does not carry over to the path of the next
-(the levels of DIR's curve after its first checkpoint, one run each).
+(the levels of the reference curve after its first checkpoint, one run
+each). DIR is the reference run's output directory, or the --runs
+directory of a bench_solver invocation with --extra "-checkpoint_levels
+true" (the reference of run LABEL is then its subdirectory LABEL_*).
 --reuse reads the runs that an earlier invocation with the same arguments
 left in --runs (their curve.csv and log.txt) instead of running them.
 
@@ -117,22 +120,32 @@ def scene_runs(a):
     return runs
 
 
-def level_starts(a):
-    """[(tag, checkpoint, pressures)] of --restart-levels: level k + 1 of the
-    reference curve from its checkpoint_level_<k>.h5, with -pressures up to it."""
-    curve = os.path.join(a.restart_levels, "curve.csv")
+def level_starts(a, label):
+    """[(tag, checkpoint, pressures)] of --restart-levels for run `label`: level
+    k + 1 of the reference curve from its checkpoint_level_<k>.h5, with
+    -pressures up to it. The reference run is DIR itself or the one
+    subdirectory of DIR named <label>_* (the runs of an earlier bench_solver
+    invocation with --runs DIR)."""
+    ref = a.restart_levels
+    subs = [d for d in sorted(os.listdir(ref)) if d.startswith(label + "_") and os.path.isdir(os.path.join(ref, d))] \
+        if os.path.isdir(ref) else []
+    if len(subs) > 1:
+        sys.exit(f"--restart-levels {ref}: several reference runs of {label}: {' '.join(subs)}")
+    if subs:
+        ref = os.path.join(ref, subs[0])
+    curve = os.path.join(ref, "curve.csv")
     if not os.path.exists(curve):
-        sys.exit(f"--restart-levels {a.restart_levels}: no curve.csv (the directory of a compact run with "
-                 "-checkpoint_levels true)")
+        sys.exit(f"--restart-levels {a.restart_levels}: no curve.csv of {label} (the directory of a compact run with "
+                 "-checkpoint_levels true, or of bench_solver runs with --extra \"-checkpoint_levels true\")")
     with open(curve) as f:
         pressures = [float(r["P_over_E"]) for r in csv.DictReader(f)]
     starts = []
     for k in range(len(pressures) - 1):
-        path = os.path.join(a.restart_levels, f"checkpoint_level_{k:04d}.h5")
+        path = os.path.join(ref, f"checkpoint_level_{k:04d}.h5")
         if os.path.exists(path):
             starts.append((f"_L{k + 1:02d}", path, ",".join(repr(p) for p in pressures[:k + 2])))
     if not starts:
-        sys.exit(f"--restart-levels {a.restart_levels}: no checkpoint_level_<k>.h5 before its last level")
+        sys.exit(f"--restart-levels {ref}: no checkpoint_level_<k>.h5 before its last level")
     return starts
 
 
@@ -290,8 +303,8 @@ def main():
     rows = []
     if a.restart_levels and a.restart:
         sys.exit("--restart and --restart-levels exclude each other")
-    starts = level_starts(a) if a.restart_levels else [("", "", "")]
-    jobs = [(scene, label, ranks, opts, s, st) for scene, label, ranks, opts in runs for st in starts for s in a.strategies]
+    jobs = [(scene, label, ranks, opts, s, st) for scene, label, ranks, opts in runs
+            for st in (level_starts(a, label) if a.restart_levels else [("", "", "")]) for s in a.strategies]
     with cf.ThreadPoolExecutor(max_workers=a.jobs) as pool:
         futs = {pool.submit(run_one, a, *j): j for j in jobs}
         for f in cf.as_completed(futs):
