@@ -33,7 +33,7 @@ PetscErrorCode LevelSolverParameters::SetFromOptions(MPI_Comm comm) {
                               "plus an exact l1 penalty on penetration beyond 1e-3 <d> and Tresca friction with the normal forces "
                               "lagged at the iterate; the shift then grows until the step has positive curvature)",
                               "", merits, 2, merits[merit_choice], &merit_choice, nullptr));
-  PetscCall(PetscOptionsInt("-level_attempt_its", "hybrid: linearizations of the newton attempt before anchored takes over", "",
+  PetscCall(PetscOptionsInt("-level_attempt_its", "hybrid: most linearizations of the newton attempt before anchored takes over (sooner once |F|_inf has not halved over 10)", "",
                             attempt_its, &attempt_its, nullptr));
   PetscCall(PetscOptionsInt("-level_max_its", "newton (and auto's frictionless levels): linearizations per load step before the step is halved (compact's settling steps, which are not halved: 5 times as many before hybrid takes over)", "", max_its,
                             &max_its, nullptr));
@@ -151,6 +151,13 @@ constexpr double kAttemptOverlap = 0.1; // hybrid: deepest overlap of the newton
 // damped steps (docs/level-solver-measurements.md, "Measured: the overlap
 // limit of the attempt's hand-over").
 constexpr double kHandoverOverlap = 1e-2;
+// hybrid: the attempt hands over to anchored once its largest force |F|_inf
+// has not halved over its last kAttemptWindow linearizations. Levels that
+// deform the packing converge in the attempt or leave it far down; levels
+// that rearrange it stall there at |F|_inf of 1e-2 to 1e-1 P <d>, and
+// anchored does better from the sooner hand-over (docs/level-solver-
+// measurements.md, "Measured: the attempt's length level by level").
+constexpr size_t kAttemptWindow = 10;
 // The energy merit accepts a trial below the largest merit of this many
 // iterates (the iterate's and its predecessors'). Newton steps that roll
 // deformable disks along their contacts lose their accuracy within a
@@ -389,6 +396,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
   double last_step = INFINITY;       // largest body move of the last accepted step
   int rejections = 0;
   bool converged = false;
+  std::vector<double> attempt_forces;  // hybrid's attempt: |F|_inf at each linearization
   for (;;) {
     // Converged: small residual with a stable contact state, and every
     // contact that can touch is a candidate (checked whenever a body may
@@ -444,6 +452,14 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
     if (report->newton_its >= max_its) {
       report->reason = SNES_DIVERGED_MAX_IT;
       break;
+    }
+    if (attempt) {  // one entry per linearization (a candidate refresh passes here again)
+      if (attempt_forces.size() <= static_cast<size_t>(report->newton_its)) attempt_forces.push_back(force);
+      const size_t n = attempt_forces.size();
+      if (n > kAttemptWindow && force > 0.5 * attempt_forces[n - 1 - kAttemptWindow]) {
+        report->reason = SNES_DIVERGED_MAX_IT;
+        break;
+      }
     }
     // One linearization per iteration. The energy is not defined where an
     // element is inverted (a start state handed over folded): there the

@@ -92,6 +92,7 @@
 //   (kDivergedForce): the controller cuts it.
 //   The SNES and its callbacks live in level_solver.cpp over a small context.
 // hybrid: a newton attempt of at most -level_attempt_its linearizations,
+//   ended earlier once its largest force has not halved over its last 10,
 //   started from the tangent predictor with overlaps up to 0.1 <d> admitted
 //   (newton's first steps move bodies by 0.1 <d> and more, so it closes such
 //   overlaps in a step or two, where anchored's damped first steps would
