@@ -49,13 +49,14 @@ PetscErrorCode LevelOutputs::Level(size_t level, const std::vector<double> &pres
   rows_.push_back(values);
   PetscCall(curve_.Row(values));
   if (files_.hdf5) PetscCall(WriteLevelHDF5(comm_, files_.dir + "/levels.h5", static_cast<int>(level), pressures[level], problem));
-  if (files_.checkpoint) {
+  if (files_.checkpoint || files_.checkpoint_levels) {
+    // One snapshot (WriteLevelCheckpoint completes c), written to
+    // checkpoint.h5 and/or the level's own file.
     c.columns = columns_;
-    PetscCall(WriteLevelCheckpoint(comm_, files_.dir + "/checkpoint.h5", pressures, level, rows_, load_step, problem, &c));
-  }
-  if (files_.checkpoint_levels) {
-    c.columns = columns_;
-    PetscCall(WriteLevelCheckpoint(comm_, LevelCheckpointPath(level), pressures, level, rows_, load_step, problem, &c));
+    const std::string level_path = LevelCheckpointPath(level);
+    PetscCall(WriteLevelCheckpoint(comm_, files_.checkpoint ? files_.dir + "/checkpoint.h5" : level_path, pressures, level,
+                                   rows_, load_step, problem, &c));
+    if (files_.checkpoint && files_.checkpoint_levels) PetscCall(WriteCheckpoint(comm_, level_path, c));
   }
   PetscFunctionReturn(0);
 }
