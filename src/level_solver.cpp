@@ -180,6 +180,19 @@ constexpr double kInnerForcing = 1e-2;
 // and a retry. Measured on the same scenes (docs/level-solver-measurements.md): 1.25 and
 // 1.5 took 3396 and 3414 iterations against 3631 with 2.
 constexpr double kMoveGrowth = 1.25;
+// Once the largest force of a pseudo-time step passes the level's force
+// tolerance, m grows by this factor after every step. What keeps such a
+// level going is then the net force of bodies whose nodal forces all pass,
+// the virial and the contact rows, and the anchor term itself holds them:
+// an inner solve brings |G| = |F + rho_a D (z - z_a)| down a
+// hundredfold while |F| only halves, since rho_a = |F|_inf / (m <d>)
+// falls no faster than |F|_inf (1500 disks, P/E 1e-3: the largest body
+// force from 1e-2 to 4e-4 P <d> over five steps of four iterations, with
+// |F|_inf below 1e-4 P <d> and m at 1e-3 to 2e-3 <d>). Growing m faster than
+// the residual falls lets rho_a fall faster than |F|, as in the switched
+// evolution relaxation of Psi-tc (docs/level-solver-measurements.md,
+// "Measured: the move grown once the largest force passes").
+constexpr double kSettledGrowth = 4.0;
 // anchored gives a sub-step up (the load controller cuts it) once its force
 // residual exceeds this multiple of the larger of its value at the start of
 // the sub-step and P <d>. Each pseudo-time step only has to reduce the
@@ -1269,7 +1282,8 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     }
     failures = 0;
     rho_retry = 0.0;
-    if (its <= pp.ptc_easy_its && !stalled_) move = std::min(kMoveGrowth * move, 1.0);
+    if (force_passes) move = std::min(kSettledGrowth * move, 1.0);
+    else if (its <= pp.ptc_easy_its && !stalled_) move = std::min(kMoveGrowth * move, 1.0);
   }
   PetscCall(p_.EndLoadStep(true, report));
   PetscFunctionReturn(0);
