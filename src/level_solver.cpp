@@ -1056,7 +1056,8 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   // unbalanced force moves a body by at most about m <d> per step (so the
   // linearized contact geometry stays valid), and rho_a vanishes with the
   // residual, so the steps grow to plain Newton steps near equilibrium
-  // (switched evolution relaxation). m grows by kMoveGrowth after an easy inner solve and
+  // (switched evolution relaxation). m grows by kMoveGrowth after an easy inner solve
+  // (by kSettledGrowth after every step once the largest force passes) and
   // is divided by 4 after a failed one. The level is converged when the
   // residual WITHOUT the term is below tolerance with a stable contact state,
   // so the regularization has vanished at the accepted equilibrium.
