@@ -67,7 +67,7 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                               "its Newton matrix: one more factorization per level); halved while it would make bodies "
                               "overlap or invert an element",
                               "", predictor_names, 3, predictor_names[predictor_choice], &predictor_choice, nullptr));
-  PetscCall(PetscOptionsInt("-ptc_easy_its", "pseudo-transient continuation: grow the move by 1.25 after an inner solve of at most this many Newton iterations (by 4 after every step once the largest force passes the level tolerance)",
+  PetscCall(PetscOptionsInt("-ptc_easy_its", "pseudo-transient continuation: grow the move by 1.25 after an inner solve of at most this many Newton iterations (by 4 after every step once the largest force passes the level tolerance, up to half the least move that failed since)",
                             "", ptc_easy_its, &ptc_easy_its, nullptr));
   PetscCall(PetscOptionsInt("-ptc_stall_its", "pseudo-transient continuation: an inner solve that has not reached its 100-fold residual drop after this many Newton iterations is cut short: its last iterate is the pseudo-time step if the residual decreased, else its iterate of least residual if that one is below the start's, else it is retried with more damping",
                             "", ptc_stall_its, &ptc_stall_its, nullptr));

@@ -64,7 +64,9 @@
 //   to the body and wall rows (the problem's SetAnchor), rho = |F|_inf /
 //   (m <d>) from the unbalanced force F of the previous pseudo-time step, m
 //   = -ptc_move at first, grown by 1.25 after an inner solve of at most
-//   -ptc_easy_its iterations, divided by 4 after a failed one; the anchor
+//   -ptc_easy_its iterations (by 4 after every step once |F|_inf passes the
+//   level's tolerance, up to half the least m that failed since), divided
+//   by 4 after a failed one; the anchor
 //   moves to each solution and rho vanishes with F. A sub-step is accepted at
 //   exact equilibrium (|R| <= 1e-11 E <d>) or, with -level_force_rtol tol >
 //   0, by the paper's criterion per node and per body (|F|_inf <= tol P <d>,
