@@ -15,8 +15,11 @@ Per level (the rows of compact's table):
              balance, the contact rows and the contact states)
   end_game   iterations after the step that began the end game (the
              "end game" line of -ptc_monitor; empty where it did not begin)
+  jumps      pseudo-time steps whose |F|_inf exceeds JUMP times the larger of
+             the step before's and P <d> (a step that unbalanced the packing,
+             which later steps have to bring back)
 
-usage: ptc_breakdown.py LOG [--tol 1e-4] [--csv OUT.csv]
+usage: ptc_breakdown.py LOG [--tol 1e-4] [--jump 10] [--csv OUT.csv]
 """
 import argparse
 import csv
@@ -28,7 +31,7 @@ FAILED = re.compile(r"^  ptc +\d+  inner solve failed \(\S+ after (\d+) its")
 END_GAME = re.compile(r"^  ptc +\d+  end game:")
 
 
-def breakdown(lines, tol):
+def breakdown(lines, tol, jump=10.0):
     levels, steps, end_game_at = [], [], None
     for line in lines:
         m = ROW.match(line)
@@ -36,18 +39,21 @@ def breakdown(lines, tol):
             P, its = float(m[1]), int(m[3])
             anchored = sum(s[1] for s in steps)
             failed = [s for s in steps if s[0] == "failed"]
-            done, phi_last, settled = 0, None, None
+            done, phi_last, settled, force_last, jumps = 0, None, None, None, 0
             for kind, n, force, phi in steps:
                 done += n
                 if kind != "step":
                     continue
                 if settled is None and phi_last is not None and force <= tol * P and abs(phi - phi_last) <= tol * phi:
                     settled = anchored - done
-                phi_last = phi
+                if force_last is not None and force > jump * max(force_last, P):
+                    jumps += 1
+                phi_last, force_last = phi, force
             levels.append({"P_over_E": P, "its": its, "before": its - anchored, "anchored": anchored,
                            "failed": len(failed), "failed_its": sum(s[1] for s in failed),
                            "settled": "" if settled is None else settled,
-                           "end_game": "" if end_game_at is None else anchored - end_game_at})
+                           "end_game": "" if end_game_at is None else anchored - end_game_at,
+                           "jumps": jumps})
             steps, end_game_at = [], None
             continue
         m = STEP.match(line)
@@ -67,13 +73,14 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("log")
     ap.add_argument("--tol", type=float, default=1e-4, help="the level criterion's -level_force_rtol and -level_phi_rtol")
+    ap.add_argument("--jump", type=float, default=10.0, help="the factor of the jumps column")
     ap.add_argument("--csv", help="also write the table as CSV")
     a = ap.parse_args()
     with open(a.log) as f:
         # the rows of compact's table come after its header line
         lines = f.read().split(" P/E      phi", 1)[-1].splitlines()
-    levels = breakdown(lines, a.tol)
-    keys = ["P_over_E", "its", "before", "anchored", "failed", "failed_its", "settled", "end_game"]
+    levels = breakdown(lines, a.tol, a.jump)
+    keys = ["P_over_E", "its", "before", "anchored", "failed", "failed_its", "settled", "end_game", "jumps"]
     print("\t".join(keys))
     for lv in levels:
         print("\t".join(f"{lv[k]:g}" if isinstance(lv[k], float) else str(lv[k]) for k in keys))
