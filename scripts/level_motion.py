@@ -63,8 +63,9 @@ def main():
     if len(paths) < 2:
         sys.exit(f"level_motion.py: {run} holds fewer than two checkpoint_level_*.h5 (run compact with -checkpoint_levels true)")
     rows = []
+    packing, u1, w1 = load(paths[0])
     for k in range(1, len(paths)):
-        packing, u0, w0 = load(paths[k - 1])
+        u0, w0 = u1, w1  # each checkpoint is read once: the end of one level is the start of the next
         _, u1, w1 = load(paths[k])
         level = int(os.path.basename(paths[k])[len("checkpoint_level_"):-3])
         c = curve[level]
