@@ -24,7 +24,6 @@ Usage:
 import argparse
 import csv
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -34,16 +33,10 @@ import h5py
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from check_overlap import check_level  # noqa: E402
+from provenance import git_commit, machine  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LAW_OPTIONS = {law: ["-contact_deformable", law] for law in ("nts", "two_pass", "mortar")}
-
-
-def git_commit():
-    try:
-        return subprocess.check_output(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], text=True).strip()
-    except Exception:
-        return "unknown"
 
 
 def read_curve(path):
@@ -101,7 +94,7 @@ def main():
               "slave_nodes_inside", "slave_deepest_over_d", "master_nodes_inside", "master_deepest_over_d"]
     with open(a.out + ".csv", "w", newline="") as f:
         f.write(f"# scripts/bench_contact.py {' '.join(sys.argv[1:])}\n")
-        f.write(f"# machine: {platform.node()}, {os.cpu_count()} cores; commit {git_commit()}; {a.jobs} runs at a time\n")
+        f.write(f"# machine: {machine()}; commit {git_commit()}; {a.jobs} runs at a time\n")
         f.write("# deepest: boundary node inside another deformable disk's quadratic boundary, in <d> (check_overlap.py)\n")
         w = csv.writer(f)
         w.writerow(header)

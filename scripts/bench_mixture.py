@@ -23,32 +23,15 @@ Usage:
 import argparse
 import csv
 import os
-import platform
 import subprocess
 import sys
 import time
 
 import numpy as np
 
+from provenance import git_commit, machine
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def git_commit():
-    try:
-        return subprocess.check_output(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], text=True).strip()
-    except Exception:
-        return "unknown"
-
-
-def cpu_name():
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def main():
@@ -101,7 +84,7 @@ def main():
                 sys.stdout.flush()
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out + ".csv", "w", newline="") as f:
-        f.write(f"# machine: {platform.node()}, {os.cpu_count()} cores, {cpu_name()}\n")
+        f.write(f"# machine: {machine()}\n")
         f.write(f"# commit: {git_commit()}\n")
         f.write(f"# command: {' '.join(sys.argv)}\n# compact options: -pressures {args.pressures} {args.extra}\n")
         w = csv.writer(f)
@@ -125,7 +108,7 @@ def main():
     ax[0].set(xlabel="P / E", ylabel="Newton iterations per level")
     ax[1].set(xlabel="P / E", ylabel="seconds per level")
     ax[0].legend(fontsize=6)
-    fig.suptitle(f"deformix compact, commit {git_commit()}, {platform.node()}", fontsize=9)
+    fig.suptitle(f"deformix compact, commit {git_commit()}, {machine()}", fontsize=9)
     fig.tight_layout()
     fig.savefig(args.out + ".png", dpi=120)
     print("wrote", args.out + ".png")

@@ -33,13 +33,14 @@ import argparse
 import csv
 import hashlib
 import os
-import platform
 import re
 import shlex
 import signal
 import subprocess
 import sys
 import time
+
+from provenance import machine
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MEM_RE = re.compile(r"Maximum \(over computational time\) process memory:\s+total\s+(\S+)\s+max\s+(\S+)\s+min\s+(\S+)")
@@ -57,21 +58,6 @@ def run_text(cmd):
         return subprocess.run(cmd, capture_output=True, text=True).stdout.strip()
     except OSError:
         return "unknown"
-
-
-def machine():
-    cpu, mem = platform.processor() or "unknown", "unknown"
-    for path, key in (("/proc/cpuinfo", "model name"), ("/proc/meminfo", "MemTotal")):
-        try:
-            with open(path) as f:
-                val = next((l.split(":", 1)[1].strip() for l in f if l.startswith(key)), None)
-        except OSError:
-            val = None
-        if val and key == "MemTotal":
-            mem = f"{int(val.split()[0]) / 2**20:.1f} GiB"
-        elif val:
-            cpu = val
-    return f"{platform.node()}, {cpu}, {os.cpu_count()} cores, {mem} memory"
 
 
 def run_compact(cmd, run_dir, timeout, env):

@@ -28,6 +28,8 @@ import time
 
 import numpy as np
 
+from provenance import cpu_name, git_commit
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DRIVER = os.path.join(REPO, "build", "bin", "single-particle")
 # the driver's default list, passed explicitly so the benchmark does not depend on defaults
@@ -41,25 +43,12 @@ def machine_info():
         uname = subprocess.run(["uname", "-a"], capture_output=True, text=True).stdout.strip()
     except OSError:
         pass
-    cpu = "unknown"
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    commit = subprocess.run(["git", "-C", REPO, "rev-parse", "--short", "HEAD"],
-                            capture_output=True, text=True).stdout.strip()
-    dirty = subprocess.run(["git", "-C", REPO, "status", "--porcelain", "--untracked-files=no"],
-                           capture_output=True, text=True).stdout.strip()
     import hashlib
     with open(DRIVER, "rb") as f:
         sha = hashlib.sha256(f.read()).hexdigest()[:16]
     mtime = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(os.path.getmtime(DRIVER)))
-    return {"uname": uname, "nproc": os.cpu_count(), "cpu": cpu, "binary": f"sha256 {sha}, built {mtime} UTC",
-            "commit": commit + ("-dirty" if dirty else "")}
+    return {"uname": uname, "nproc": os.cpu_count(), "cpu": cpu_name(), "binary": f"sha256 {sha}, built {mtime} UTC",
+            "commit": git_commit(dirty_mark=True)}
 
 
 def run_case(runs_dir, order, mesh, nu, reuse, timeout):

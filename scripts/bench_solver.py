@@ -63,14 +63,13 @@ import concurrent.futures as cf
 import csv
 import math
 import os
-import platform
 import re
 import subprocess
 import sys
 import textwrap
 import time
 
-from bench_mixture import cpu_name, git_commit
+from provenance import git_commit, machine
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CAMPAIGN_PRESSURES = "1e-4,3e-4,1e-3,3e-3,0.01,0.02,0.05,0.1,0.15,0.2,0.25,0.3,0.4,0.5"
@@ -317,7 +316,7 @@ def main():
                   f"{wall:.0f} s", flush=True)
     order = {label: i for i, (_, label, _, _) in enumerate(runs)}
     rows.sort(key=lambda x: (order[x["run"]], a.strategies.index(x["strategy"]), x["P_over_E"]))
-    header = (f"# machine: {platform.node()}, {os.cpu_count()} cores, {cpu_name()}; commit {git_commit()}; "
+    header = (f"# machine: {machine()}; commit {git_commit()}; "
               f"{a.jobs} simulation(s) at a time\n# command: {' '.join(sys.argv)}\n")
     os.makedirs(os.path.dirname(a.out) or ".", exist_ok=True)
     with open(a.out + ".csv", "w", newline="") as f:

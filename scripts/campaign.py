@@ -20,20 +20,14 @@ import argparse
 import concurrent.futures as cf
 import csv
 import os
-import platform
 import subprocess
 import sys
 import time
 
+from provenance import git_commit, machine
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = "/usr/bin/python3" if os.path.exists("/usr/bin/python3") else sys.executable
-
-
-def commit():
-    try:
-        return subprocess.check_output(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], text=True).strip()
-    except Exception:
-        return "unknown"
 
 
 def run_one(exe, n, kappa, mu, pressures, out, timeout, extra):
@@ -95,7 +89,7 @@ def main():
                      last.get("Z_no_rattlers", ""), sum(float(l["newton_its"]) for l in levels)])
     # --fit-only keeps the runs.csv of the campaign that produced the curves.
     with open(os.path.join(a.out, "runs.csv" if not a.fit_only else os.devnull), "w", newline="") as f:
-        f.write(f"# machine: {platform.node()}, {os.cpu_count()} cores; commit {commit()}\n")
+        f.write(f"# machine: {machine()}; commit {git_commit()}\n")
         f.write(f"# command: {' '.join(sys.argv)}\n# compact: -n_particles {a.n_particles} -pressures {a.pressures} {a.extra}\n")
         w = csv.writer(f)
         w.writerow(["kappa", "friction", "status", "levels", "last_P_over_E", "seconds", "phi_last", "Z_nr_last", "newton_its"])

@@ -19,8 +19,6 @@ Usage:
 import csv
 import glob
 import os
-import platform
-import subprocess
 import sys
 
 import h5py
@@ -29,6 +27,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from provenance import git_commit, machine  # noqa: E402
 
 
 def load(path):
@@ -90,12 +90,8 @@ def main():
         print(f"{float(r['P_over_E']):8.3g} {r['newton_its']:>5} {r['affine_mean']:9.2e} {r['nonaffine_median']:9.2e} "
               f"{r['nonaffine_p90']:9.2e} {r['nonaffine_p99']:9.2e} {r['nonaffine_max']:9.2e} "
               f"{r['fraction_above_1e-3']:6.2f} {r['top10_share']:6.2f}")
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    except OSError:
-        commit = "?"
     with open(out_csv, "w", newline="") as f:
-        f.write(f"# machine: {platform.node()}; commit {commit}; run {run}\n")
+        f.write(f"# machine: {machine()}; commit {git_commit()}; run {run}\n")
         f.write(f"# command: {' '.join(sys.argv)}\n")
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -111,7 +107,7 @@ def main():
     ax[1].semilogx(p, [int(float(r["newton_its"])) for r in rows], "o-")
     ax[1].set_xlabel("P/E")
     ax[1].set_ylabel("Newton iterations of the level")
-    fig.suptitle(f"{run} (commit {commit})")
+    fig.suptitle(f"{run} (commit {git_commit()})")
     fig.tight_layout()
     fig.savefig(out_png, dpi=120)
     print(f"wrote {out_csv} and {out_png}")

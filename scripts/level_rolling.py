@@ -19,8 +19,6 @@ their directory).
 """
 import csv
 import os
-import platform
-import subprocess
 import sys
 
 import h5py
@@ -29,6 +27,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from provenance import git_commit, machine  # noqa: E402
 
 
 def boundary_nodes(cells):
@@ -87,13 +87,8 @@ def main():
                          "largest_roll_over_h": largest, "median_roll_over_h": median})
             print(f"{labels[run]}  P/E {level['P_over_E']:>8}  {int(level['newton_its']):5d} Newton its  "
                   f"largest roll {largest:5.2f} h  median {median:5.3f} h")
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=os.path.dirname(os.path.abspath(__file__))).stdout.strip()
-    except OSError:
-        commit = "unknown"
     with open(out_csv, "w", newline="") as f:
-        f.write(f"# analysed at commit {commit or 'unknown'}, machine {platform.node()}\n")
+        f.write(f"# analysed at commit {git_commit()}, machine {machine()}\n")
         f.write("# command: scripts/level_rolling.py " + " ".join(sys.argv[1:]) + "\n")
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         w.writeheader()
