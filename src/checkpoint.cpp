@@ -236,7 +236,6 @@ PetscErrorCode WriteCheckpoint(MPI_Comm comm, const std::string &path, const Che
         write_array(file, "packing", disks, 4);
         write_array(file, "walls", std::vector<double>(p.walls, p.walls + 4));
         write_state(file, "current", c.state.current, c.state.pressure);
-        write_state(file, "previous", c.state.previous, c.state.previous_pressure);
         check(H5Fflush(file, H5F_SCOPE_GLOBAL), "flush");
       }
       if (std::rename(tmp.c_str(), path.c_str()) != 0) throw H5Failure("cannot rename " + tmp + " to " + path);
@@ -310,7 +309,6 @@ PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, Checkpoint
     if (walls.size() != 4) throw H5Failure("walls does not have 4 entries");
     std::copy(walls.begin(), walls.end(), c->packing.walls);
     c->state.current = read_state(file, "current", &c->state.pressure);
-    c->state.previous = read_state(file, "previous", &c->state.previous_pressure);
   } catch (const H5Failure &e) {
     error = e.what();
   }

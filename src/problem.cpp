@@ -39,7 +39,7 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
   PetscInt ncp_choice = ncp == NcpFunction::Min ? 0 : 1;
   const char *const ncp_names[] = {"min", "fb", "NcpFunction", "ncp_", nullptr};
   PetscInt deformable_choice = static_cast<PetscInt>(deformable_contact);
-  const char *const predictor_names[] = {"none", "secant", "tangent"};  // LoadPredictor order
+  const char *const predictor_names[] = {"none", "tangent"};  // LoadPredictor order
   PetscInt predictor_choice = static_cast<PetscInt>(predictor);
   const char *const deformable_names[] = {"nts", "two_pass", "mortar"};  // DeformableContact order
   PetscFunctionBeginUser;
@@ -62,11 +62,11 @@ PetscErrorCode ProblemParameters::SetFromOptions(MPI_Comm comm) {
                              "fix the mean rotation of frictionless deformable bodies (zero-energy mode; its torque is reported)",
                              "", constrain_rotation, &constrain_rotation, nullptr));
   PetscCall(PetscOptionsEList("-predictor",
-                              "initial guess of each load step: none (the last converged state), secant (extrapolated "
-                              "from the last two converged states) or tangent (the last state plus dP dz/dP, solved with "
-                              "its Newton matrix: one more factorization per level); halved while it would make bodies "
-                              "overlap or invert an element",
-                              "", predictor_names, 3, predictor_names[predictor_choice], &predictor_choice, nullptr));
+                              "initial guess of each load step: none (the last converged state) or tangent (the last "
+                              "state plus dP dz/dP, solved with its Newton matrix: one more factorization per level; "
+                              "halved while it would make bodies overlap or invert an element); hybrid's attempt always "
+                              "starts from the tangent",
+                              "", predictor_names, 2, predictor_names[predictor_choice], &predictor_choice, nullptr));
   PetscCall(PetscOptionsInt("-ptc_easy_its", "pseudo-transient continuation: grow the move by 1.25 after an inner solve of at most this many Newton iterations (by 4 after every step once the largest force passes the level tolerance, up to half the least move that failed since)",
                             "", ptc_easy_its, &ptc_easy_its, nullptr));
   PetscCall(PetscOptionsInt("-ptc_stall_its", "pseudo-transient continuation: an inner solve that has not reached its 100-fold residual drop after this many Newton iterations is cut short: its last iterate is the pseudo-time step if the residual decreased, else its iterate of least residual if that one is below the start's, else it is retried with more damping",
@@ -382,9 +382,7 @@ void CompactionProblem::RestoreState(const State &s) {
 CompactionProblem::Snapshot CompactionProblem::TakeSnapshot() const {
   Snapshot s;
   s.current = SaveState();
-  s.previous = previous_;
   s.pressure = pressure_;
-  s.previous_pressure = previous_pressure_;
   s.have_previous = have_previous_;
   return s;
 }
@@ -418,11 +416,8 @@ PetscErrorCode CompactionProblem::RestoreSnapshot(const Snapshot &s) {
     PetscFunctionReturn(0);
   };
   PetscCall(fits(s.current, "current"));
-  if (s.have_previous) PetscCall(fits(s.previous, "previous"));
   RestoreState(s.current);
   PetscCall(DestroySolver());
-  previous_ = s.previous;
-  previous_pressure_ = s.previous_pressure;
   have_previous_ = s.have_previous;
   pressure_ = s.pressure;
   u_start_ = u_;
@@ -1428,26 +1423,14 @@ PetscErrorCode CompactionProblem::BeginLoadStep(double pressure, LoadPredictor p
   if (ksp_) PetscCall(SetUpLayout());
   step_saved_ = SaveState();
   step_saved_pressure_ = pressure_;
-  const State &saved = step_saved_;
   u_start_ = u_;
-  // Predictors along the load path (none for the first increment, and the
-  // secant none for the second: the state at P = 0 is the unloaded packing,
-  // whose settling is not a response proportional to the load). Either is
-  // halved while it would make bodies overlap by more than overlap_limit
-  // <d> or invert an element: the first Newton step has to close every
-  // predicted overlap at once, and a strongly damped one closes it slowly.
+  // The tangent predictor (none for the first increment: the state at P = 0
+  // is the unloaded packing) is halved while it would make bodies overlap by
+  // more than overlap_limit <d> or invert an element: the first Newton step
+  // has to close every predicted overlap at once, and a strongly damped one
+  // closes it slowly.
   bool tangent = false;  // the multipliers come from the tangent
-  if (predictor == LoadPredictor::Secant && have_previous_ && previous_pressure_ > 0.0 &&
-      pressure_ != previous_pressure_) {
-    // Secant: extrapolate the bodies and walls from the last two converged states.
-    double t = (pressure - pressure_) / (pressure_ - previous_pressure_);
-    for (int attempt = 0; attempt < 5; ++attempt, t *= 0.5) {
-      for (size_t i = 0; i < u_.size(); ++i) u_[i] = saved.u[i] + t * (saved.u[i] - previous_.u[i]);
-      for (int k = 0; k < 4; ++k) w_[k] = saved.w[k] + t * (saved.w[k] - previous_.w[k]);
-      if (PredictionAdmissible(overlap_limit)) break;
-      if (attempt == 4) u_ = saved.u, std::copy(saved.w, saved.w + 4, w_);
-    }
-  } else if (predictor == LoadPredictor::Tangent && have_previous_ && pressure_ > 0.0 && pressure != pressure_) {
+  if (predictor == LoadPredictor::Tangent && have_previous_ && pressure_ > 0.0 && pressure != pressure_) {
     PetscCall(TangentPredictor(pressure - pressure_, overlap_limit, &tangent));
   }
   // Contact forces scale with the pressure: for rigid disks the scaled
@@ -1478,8 +1461,6 @@ PetscErrorCode CompactionProblem::EndLoadStep(bool converged, SolveReport *repor
   report->layouts = layouts_created_ - layouts_at_step_;
   report->active_contacts = 0;
   for (char a : active_now_) report->active_contacts += a != kOpen;
-  previous_ = step_saved_;
-  previous_pressure_ = step_saved_pressure_;
   have_previous_ = true;
   PetscFunctionReturn(0);
 }

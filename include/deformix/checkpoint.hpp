@@ -14,8 +14,9 @@
 //   - the load controller's suggested step and driver-specific numbers
 //     (compact: the last level's phi and P, for the finite-difference bulk
 //     modulus of the next level);
-//   - the solver state and the one before it (CompactionProblem::Snapshot):
-//     displacements, walls, gauges, candidates and their multipliers.
+//   - the solver state (CompactionProblem::Snapshot): displacements, walls,
+//     gauges, candidates and their multipliers, and whether a load step has
+//     converged before it (have_previous).
 // On one rank a restarted run repeats the uninterrupted one bit for bit; on
 // another number of ranks it agrees to solver tolerance, as any run does.
 //
@@ -25,7 +26,7 @@
 //   /levels               P/E of the levels done
 //   /curve                their curve.csv rows (attribute "columns": the header)
 //   /packing              x, y, radius, deformable (N_p x 4);  /walls (4)
-//   /current, /previous   u, walls, torque, lambda_n, lambda_t, candidates
+//   /current              u, walls, torque, lambda_n, lambda_t, candidates
 //                         (n x 6: type, body, point, wall, master, segment);
 //                         attribute pressure
 // Rank 0 writes FILE.tmp and renames it to FILE: an interrupted write never

@@ -98,8 +98,8 @@ namespace deformix {
 enum class DeformableContact : int { NodeToSegment = 0, TwoPass = 1, Mortar = 2 };
 
 // Initial guess of a load step (BeginLoadStep): the last converged state,
-// its secant extrapolation along the load path, or its tangent dz/dP.
-enum class LoadPredictor : int { None = 0, Secant = 1, Tangent = 2 };
+// or that state plus its tangent dz/dP times the load increment.
+enum class LoadPredictor : int { None = 0, Tangent = 1 };
 
 struct ProblemParameters {
   double young = 1.0;            // E
@@ -118,7 +118,7 @@ struct ProblemParameters {
   double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   DeformableContact deformable_contact = DeformableContact::NodeToSegment;  // law of deformable-deformable pairs
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
-  LoadPredictor predictor = LoadPredictor::Secant;  // initial guess of a load step (-predictor)
+  LoadPredictor predictor = LoadPredictor::None;  // initial guess of a load step (-predictor)
   double repartition_tol = 0.1;  // repartition when the new edge cut is smaller by this fraction or the imbalance exceeds 1 + this (< 0: never)
   PetscBool partition_view = PETSC_FALSE;     // print edge cut and imbalance of every (re)partition
   double progress_interval = 60.0;  // seconds between progress lines within a long sub-step (0: every pseudo-time step, < 0: none)
@@ -406,11 +406,12 @@ class CompactionProblem {
   void RestoreState(const State &s);
 
   // Everything a restart needs to continue a run exactly where it stopped
-  // (checkpoint.hpp): the state, the one before it (the secant predictor's
-  // second point) and their pressures. The solver objects are rebuilt from it.
+  // (checkpoint.hpp): the state, its pressure and whether a load step has
+  // converged before (the tangent predictor's condition). The solver
+  // objects are rebuilt from it.
   struct Snapshot {
-    State current, previous;
-    double pressure = 0.0, previous_pressure = 0.0;
+    State current;
+    double pressure = 0.0;
     bool have_previous = false;
   };
   Snapshot TakeSnapshot() const;
@@ -572,9 +573,7 @@ class CompactionProblem {
   std::vector<double> torque_;   // rotation-gauge multipliers, one per constrained body
   double w_[4] = {0, 0, 0, 0};
   double pressure_ = 0.0;
-  State previous_;               // last converged state before the current one (predictor)
-  double previous_pressure_ = 0.0;
-  bool have_previous_ = false;
+  bool have_previous_ = false;   // a load step has converged (the tangent predictor needs its state)
   double mean_diameter_ = 1.0;
   bool friction_on_ = true;
   std::vector<ContactCandidate> candidates_;
