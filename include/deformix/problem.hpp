@@ -115,7 +115,7 @@ struct ProblemParameters {
   PetscBool ptc_anchor_forces = PETSC_TRUE;  // anchored: the contact forces of closed and sticking contacts anchored too (SetAnchor)
   double level_force_rtol = 0.0; // accept |F|_inf <= this x P <d> with phi settled (0: exact equilibrium only)
   double level_phi_rtol = 1e-4;  // the paper's criterion: relative change of phi in the last pseudo-time step
-  double contact_margin = 0.05;  // candidate pairs: gap < margin * (mean diameter)
+  double contact_margin = 0.1;   // candidate pairs: gap < margin * (mean diameter)
   DeformableContact deformable_contact = DeformableContact::NodeToSegment;  // law of deformable-deformable pairs
   PetscBool constrain_rotation = PETSC_TRUE;  // rotation gauge for frictionless deformable bodies
   LoadPredictor predictor = LoadPredictor::None;  // initial guess of a load step (-predictor)
