@@ -389,33 +389,29 @@ CompactionProblem::Snapshot CompactionProblem::TakeSnapshot() const {
 
 PetscErrorCode CompactionProblem::RestoreSnapshot(const Snapshot &s) {
   PetscFunctionBeginUser;
-  const auto fits = [this](const State &st, const char *which) -> PetscErrorCode {
-    PetscFunctionBeginUser;
-    PetscCheck(st.u.size() == u_.size() && st.torque.size() == torque_.size(), comm_, PETSC_ERR_FILE_UNEXPECTED,
-               "the %s state has %zu body unknowns and %zu rotation gauges, this scene %zu and %zu", which, st.u.size(),
-               st.torque.size(), u_.size(), torque_.size());
-    PetscCheck(st.lambda.size() == st.candidates.size() && st.lambda_t.size() == st.candidates.size(), comm_,
-               PETSC_ERR_FILE_UNEXPECTED, "the %s state has %zu candidates but %zu / %zu multipliers", which,
-               st.candidates.size(), st.lambda.size(), st.lambda_t.size());
-    const int n_def = static_cast<int>(bodies_.size()), n_rigid = static_cast<int>(rigid_.size());
-    for (const ContactCandidate &c : st.candidates) {
-      const bool rigid_slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid;
-      const int n_slaves = rigid_slave ? n_rigid : n_def;
-      bool ok = c.body >= 0 && c.body < n_slaves && static_cast<int>(c.type) >= 0 && static_cast<int>(c.type) <= 4;
-      if (ok && !rigid_slave) ok = c.point >= 0 && c.point < static_cast<int>(bodies_[c.body].mesh.boundary.size());
-      if (ok && (c.type == ContactType::RigidRigid || c.type == ContactType::RigidNode)) ok = c.master >= 0 && c.master < n_rigid;
-      if (ok && (c.type == ContactType::PointWall || c.type == ContactType::RigidWall))
-        ok = static_cast<int>(c.wall) >= 0 && static_cast<int>(c.wall) < 4;
-      if (ok && c.type == ContactType::NodeSegment)
-        ok = c.master >= 0 && c.master < n_def && c.segment >= 0 &&
-             c.segment < static_cast<int>(bodies_[c.master].mesh.boundary.size());
-      PetscCheck(ok, comm_, PETSC_ERR_FILE_UNEXPECTED,
-                 "the %s state has a contact candidate (type %d, body %d, point %d, master %d) that does not exist in this scene",
-                 which, static_cast<int>(c.type), c.body, c.point, c.master);
-    }
-    PetscFunctionReturn(0);
-  };
-  PetscCall(fits(s.current, "current"));
+  const State &st = s.current;
+  PetscCheck(st.u.size() == u_.size() && st.torque.size() == torque_.size(), comm_, PETSC_ERR_FILE_UNEXPECTED,
+             "the saved state has %zu body unknowns and %zu rotation gauges, this scene %zu and %zu", st.u.size(),
+             st.torque.size(), u_.size(), torque_.size());
+  PetscCheck(st.lambda.size() == st.candidates.size() && st.lambda_t.size() == st.candidates.size(), comm_,
+             PETSC_ERR_FILE_UNEXPECTED, "the saved state has %zu candidates but %zu / %zu multipliers",
+             st.candidates.size(), st.lambda.size(), st.lambda_t.size());
+  const int n_def = static_cast<int>(bodies_.size()), n_rigid = static_cast<int>(rigid_.size());
+  for (const ContactCandidate &c : st.candidates) {
+    const bool rigid_slave = c.type == ContactType::RigidWall || c.type == ContactType::RigidRigid;
+    const int n_slaves = rigid_slave ? n_rigid : n_def;
+    bool ok = c.body >= 0 && c.body < n_slaves && static_cast<int>(c.type) >= 0 && static_cast<int>(c.type) <= 4;
+    if (ok && !rigid_slave) ok = c.point >= 0 && c.point < static_cast<int>(bodies_[c.body].mesh.boundary.size());
+    if (ok && (c.type == ContactType::RigidRigid || c.type == ContactType::RigidNode)) ok = c.master >= 0 && c.master < n_rigid;
+    if (ok && (c.type == ContactType::PointWall || c.type == ContactType::RigidWall))
+      ok = static_cast<int>(c.wall) >= 0 && static_cast<int>(c.wall) < 4;
+    if (ok && c.type == ContactType::NodeSegment)
+      ok = c.master >= 0 && c.master < n_def && c.segment >= 0 &&
+           c.segment < static_cast<int>(bodies_[c.master].mesh.boundary.size());
+    PetscCheck(ok, comm_, PETSC_ERR_FILE_UNEXPECTED,
+               "the saved state has a contact candidate (type %d, body %d, point %d, master %d) that does not exist in this scene",
+               static_cast<int>(c.type), c.body, c.point, c.master);
+  }
   RestoreState(s.current);
   PetscCall(DestroySolver());
   have_previous_ = s.have_previous;
