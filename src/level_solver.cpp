@@ -418,14 +418,15 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
   for (;;) {
     // Converged: small residual with a stable contact state, and every
     // contact that can touch is a candidate (checked whenever a body may
-    // have crossed the candidate margin since the last check).
+    // have moved 0.4 x the candidate margin since the last check; a pair
+    // that overlaps or approaches, CandidatesStale, makes a refresh).
     const bool small = std::isfinite(fnorm) && fnorm <= atol;
     const bool stable = report->newton_its == 0 || changed_margin <= kDegenerateSwitch * atol || last_step <= 1e-12 * dmean;
     if (moved > detect_every || small) {
-      bool stale = false;
-      PetscCall(p_.CandidatesStale(&stale));  // the state of the iterate (adopted by at_iterate)
+      bool stale = false, approaching = false;
+      PetscCall(p_.CandidatesStale(&stale, &approaching));  // the state of the iterate (adopted by at_iterate)
       moved = 0.0;
-      if (stale) {
+      if (stale || approaching) {
         PetscCall(p_.RefreshCandidates());
         ++report->candidate_refreshes;
         PetscCall(Attach());
@@ -1163,13 +1164,20 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     // where the contact slides, which every state the test accepted with the
     // slip from the anchor meets too.
     if (ptc) p_.MarkStepStart();
-    bool stale = false;
-    PetscCall(p_.CandidatesStale(&stale));
-    if (stale && (ptc || refresh < 5)) {
+    // A pair that is approaching is made a candidate now, while it is open
+    // (the contact states stay, so the step still counts as settled): with
+    // a refresh only once a pair overlaps, a pseudo-time step can close it
+    // unseen, and near the end of a level the refresh that then follows
+    // unbalances the packing again (docs/level-solver-measurements.md,
+    // "Measured: candidates refreshed before pairs close").
+    bool stale = false, approaching = false;
+    PetscCall(p_.CandidatesStale(&stale, &approaching));
+    if ((stale || approaching) && (ptc || refresh < 5)) {
       PetscCall(p_.RefreshCandidates());
       ++report->candidate_refreshes;
       ++refresh;
-      if (!ptc) continue;
+      if (prm_.ptc_monitor && approaching) PetscCall(PetscPrintf(comm_, "  ptc %3d  candidates refreshed before a pair closed\n", outer));
+      if (!ptc && stale) continue;
     }
     if (!ptc) break;
     // Equilibrium test without the pseudo-transient term.

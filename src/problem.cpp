@@ -1318,8 +1318,10 @@ PetscErrorCode CompactionProblem::EvaluateJacobian(Vec z, Mat *J) {
 // during a solve, or a node may have slid out of its segment window: then the
 // candidates must be updated and the solve continued. A node-segment pair is
 // stale only when its closest point has left the pair's two-segment window
-// (inside it the gap is continuous). Reads the replicated state.
-PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
+// (inside it the gap is continuous). Where nothing is stale, a pair that is
+// no candidate within kApproachFraction x the margin is approaching: a
+// refresh then adds it while it is open. Reads the replicated state.
+PetscErrorCode CompactionProblem::CandidatesStale(bool *stale, bool *approaching) const {
   PetscFunctionBeginUser;
   *stale = DetectsNonCandidate(-1e-9);
   std::vector<double> zfull(n_total_);
@@ -1330,6 +1332,7 @@ PetscErrorCode CompactionProblem::CandidatesStale(bool *stale) const {
     ContactGeometry(c, zfull.data(), &lc);
     if (lc.beyond != 0 && lc.k.gap < params_.contact_margin * mean_diameter_) *stale = true;
   }
+  if (approaching) *approaching = !*stale && DetectsNonCandidate(kApproachFraction * params_.contact_margin);
   PetscFunctionReturn(0);
 }
 

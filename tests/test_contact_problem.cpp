@@ -25,6 +25,7 @@
 #include <memory>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "deformix/contact_law.hpp"
@@ -432,6 +433,57 @@ TEST(ContactProblem, StepFractionIsContinuousAtTouch) {
   }
   ASSERT_PETSC(VecDestroy(&zt));
   ASSERT_PETSC(VecDestroy(&dz));
+}
+
+// CandidatesStale on two rigid disks of diameter 1 that are no candidate
+// pair at a gap of 0.5 (margin 0.1): a gap inside the margin but outside
+// kApproachFraction of it (0.05) needs no refresh, one inside it is an approaching
+// pair, an overlap makes the candidates stale; after a refresh at a gap of
+// 0.03 the pair is a candidate and nothing approaches any more.
+TEST(ContactProblem, CandidatesStaleSeesApproachingAndOverlappingPairs) {
+  ProblemParameters params;
+  CompactionProblem problem(PETSC_COMM_WORLD);
+  ASSERT_PETSC(problem.SetParameters(params));
+  problem.AddRigidBody(0.0, 0.0, kRadius);
+  problem.AddRigidBody(2 * kRadius + 0.5, 0.0, kRadius);
+  const double walls[4] = {-kRadius - 1.0, 3 * kRadius + 1.5, -kRadius - 1.0, kRadius + 1.0};
+  problem.SetWalls(walls);
+  ASSERT_PETSC(problem.RefreshCandidates());
+  Vec z, F;
+  Mat J;
+  KSP ksp;
+  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
+  ASSERT_EQ(problem.Sizes().normal, 0) << "no pair or wall within the margin";
+  const PetscInt x_dof = FindUnknown(problem, z, "rigid particle 1 dof 0");
+  ASSERT_GE(x_dof, 0);
+  Vec z0;  // the state at the gap of 0.5
+  ASSERT_PETSC(VecDuplicate(z, &z0));
+  ASSERT_PETSC(VecCopy(z, z0));
+  const auto at_gap = [&](double gap, bool *stale, bool *approaching) -> PetscErrorCode {
+    PetscFunctionBeginUser;
+    PetscCall(VecCopy(z0, z));
+    PetscCall(VecSetValue(z, x_dof, gap - 0.5, ADD_VALUES));
+    PetscCall(VecAssemblyBegin(z));
+    PetscCall(VecAssemblyEnd(z));
+    PetscCall(problem.AdoptState(z));
+    PetscCall(problem.CandidatesStale(stale, approaching));
+    PetscFunctionReturn(0);
+  };
+  for (const auto &[gap, want_stale, want_approaching] : {std::tuple{0.08, false, false}, std::tuple{0.03, false, true}, std::tuple{-0.01, true, false}}) {
+    bool stale = !want_stale, approaching = !want_approaching;
+    ASSERT_PETSC(at_gap(gap, &stale, &approaching));
+    EXPECT_EQ(stale, want_stale) << "gap " << gap;
+    EXPECT_EQ(approaching, want_approaching) << "gap " << gap;
+  }
+  bool stale = true, approaching = true;
+  ASSERT_PETSC(at_gap(0.03, &stale, &approaching));
+  ASSERT_PETSC(VecDestroy(&z0));
+  ASSERT_PETSC(problem.RefreshCandidates());
+  ASSERT_PETSC(problem.Layout(&z, &F, &J, &ksp));
+  EXPECT_EQ(problem.Sizes().normal, 1) << "the pair";
+  ASSERT_PETSC(problem.CandidatesStale(&stale, &approaching));
+  EXPECT_FALSE(stale);
+  EXPECT_FALSE(approaching) << "the pair is a candidate after the refresh";
 }
 
 TEST(ContactProblem, EnergyMeritDissipationIsTrescaWithLaggedNormalForce) {

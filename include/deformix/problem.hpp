@@ -254,6 +254,10 @@ class CompactionProblem {
   // <d> (ContactStepFraction): the next linearization closes it. The energy
   // merit penalizes only penetration beyond it (ContactPenalty).
   static constexpr double kOpenOvershoot = 1e-3;
+  // A pair that is no candidate and has come within this fraction of the
+  // candidate margin is approaching (CandidatesStale): the solvers refresh
+  // the candidates then, before the pair can close unseen.
+  static constexpr double kApproachFraction = 0.5;
   // Gaps within this many <d> of zero are round-off of a touching contact:
   // a contact without force there has the row of a closed one (normal_ncp's tie).
   static constexpr double kTouchingGap = 1e-12;
@@ -340,8 +344,12 @@ class CompactionProblem {
   // z becomes the state of the problem (replicated on every rank).
   PetscErrorCode AdoptState(Vec z);
   // True when a non-candidate pair penetrates or a node left its segment
-  // window at the current state: RefreshCandidates, then continue.
-  PetscErrorCode CandidatesStale(bool *stale) const;
+  // window at the current state: RefreshCandidates, then continue. With
+  // approaching, also whether a pair that is no candidate has come within
+  // kApproachFraction x -contact_margin <d> (still open: a refresh then
+  // leaves the contact states as they are, and the pair is seen by the
+  // linearizations before it closes).
+  PetscErrorCode CandidatesStale(bool *stale, bool *approaching = nullptr) const;
   // Whether the detection finds a pair closer than margin <d> (negative: an
   // overlap) that is not a contact candidate.
   bool DetectsNonCandidate(double margin) const;
