@@ -1323,7 +1323,10 @@ PetscErrorCode CompactionProblem::EvaluateJacobian(Vec z, Mat *J) {
 // refresh then adds it while it is open. Reads the replicated state.
 PetscErrorCode CompactionProblem::CandidatesStale(bool *stale, bool *approaching) const {
   PetscFunctionBeginUser;
-  *stale = DetectsNonCandidate(-1e-9);
+  // One detection where no pair that is no candidate comes near (the usual
+  // case); an overlapping pair is also one within the approach margin.
+  const bool near = DetectsNonCandidate(kApproachFraction * params_.contact_margin);
+  *stale = near && DetectsNonCandidate(-1e-9);
   std::vector<double> zfull(n_total_);
   Pack(zfull.data());
   for (const ContactCandidate &c : candidates_) {
@@ -1332,7 +1335,7 @@ PetscErrorCode CompactionProblem::CandidatesStale(bool *stale, bool *approaching
     ContactGeometry(c, zfull.data(), &lc);
     if (lc.beyond != 0 && lc.k.gap < params_.contact_margin * mean_diameter_) *stale = true;
   }
-  if (approaching) *approaching = !*stale && DetectsNonCandidate(kApproachFraction * params_.contact_margin);
+  if (approaching) *approaching = !*stale && near;
   PetscFunctionReturn(0);
 }
 
