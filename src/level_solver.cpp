@@ -1058,8 +1058,11 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   // rho_a D (z - z_a), z_a the state at the start of the inner solve: each
   // SNES solve is an implicit step of an overdamped dynamics in which
   // rattlers, free rotations and sliding particles move a bounded distance.
-  // rho_a = |F|_inf / (m <d>), F the force residual without the term: an
-  // unbalanced force moves a body by at most about m <d> per step (so the
+  // rho_a = max(|F|_inf, |F_b|) / (m <d>), F the force residual without the
+  // term and |F_b| the largest net force on a body at the last test: the
+  // anchor holds a deformable disk's rigid motion as a rigid disk's
+  // (CompactionProblem::Assemble), so an unbalanced force, on one unknown
+  // or on a body as a whole, moves a body by at most about m <d> per step (so the
   // linearized contact geometry stays valid), and rho_a vanishes with the
   // residual, so the steps grow to plain Newton steps near equilibrium
   // (switched evolution relaxation). m grows by kMoveGrowth after an easy inner solve
@@ -1080,6 +1083,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   double rho_end_game = 0.0;  // the least rho_a once the end game has begun
   double phi_last = -1.0;
   double force_residual = 0.0;
+  double body_force = 0.0;  // the largest net force on a body at the last equilibrium test
   bool force_passed = false;                // the largest force has passed at some step of this sub-step
   double settled_failed_move = INFINITY;  // the least m of an inner solve that failed after that
   if (ptc) {
@@ -1101,7 +1105,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     if (ptc) p_.MarkStepStart();
     // -ptc_anchor_forces: the contact forces too (SetAnchor; docs/level-solver-
     // measurements.md, "Measured: the contact forces in the anchor").
-    p_.SetAnchor(ptc ? std::max({rho_floor, rho_retry, rho_end_game, force_residual / (move * dmean)}) : 0.0,
+    p_.SetAnchor(ptc ? std::max({rho_floor, rho_retry, rho_end_game, std::max(force_residual, body_force) / (move * dmean)}) : 0.0,
                 pp.ptc_anchor_forces);
     checked_.clear();
     history_.clear();
@@ -1195,6 +1199,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     // rows would ask more of every row the larger the packing).
     CompactionProblem::Balance b;
     PetscCall(p_.BodyBalance(F_, &b));
+    body_force = b.body_force;
     if (prm_.ptc_monitor) {
       // Where the residual is: body, wall, gauge, normal-contact, tangential rows.
       double part[5];

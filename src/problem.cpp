@@ -341,6 +341,7 @@ void CompactionProblem::Pack(double *z) const {
   std::copy(u_.begin(), u_.end(), z);
   std::copy(w_, w_ + 4, z + WallOffset());
   std::copy(torque_.begin(), torque_.end(), z + GaugeOffset());
+  std::copy(mode_.begin(), mode_.end(), z + ModeOffset());
   std::copy(lambda_.begin(), lambda_.end(), z + MultiplierOffset());
   for (size_t c = 0; c < candidates_.size(); ++c)
     if (tangential_index_[c] >= 0) z[tangential_index_[c]] = lambda_t_[c];
@@ -349,7 +350,8 @@ void CompactionProblem::Pack(double *z) const {
 void CompactionProblem::Unpack(const double *z) {
   std::copy(z, z + n_body_dofs_, u_.begin());
   std::copy(z + WallOffset(), z + WallOffset() + 4, w_);
-  std::copy(z + GaugeOffset(), z + MultiplierOffset(), torque_.begin());
+  std::copy(z + GaugeOffset(), z + ModeOffset(), torque_.begin());
+  std::copy(z + ModeOffset(), z + MultiplierOffset(), mode_.begin());
   std::copy(z + MultiplierOffset(), z + MultiplierOffset() + lambda_.size(), lambda_.begin());
   for (size_t c = 0; c < candidates_.size(); ++c)
     lambda_t_[c] = tangential_index_[c] >= 0 ? z[tangential_index_[c]] : 0.0;
@@ -595,6 +597,52 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
         if (OwnsNatural(i)) entry(i, i, (rho + rho_anchor_) * weight[i]);
   }
 
+  // Rigid modes of the deformable bodies under the anchor. rho_a D (z - z_a)
+  // alone holds a deformable disk's rigid translation by rho_a per node, n
+  // times a rigid disk's (n nodes), so that a body whose nodal forces are
+  // small but add up to a large net force creeps. With the auxiliary
+  // unknowns s = (t, theta) of each deformable body the anchor is
+  //   (rho_a / 2) sum_i |du_i - t - theta X_i^perp|^2 + (rho_a / 2)(|t|^2 + r^2 theta^2),
+  // du = z - z_a, minimized over s with the rest: deformation (du with no
+  // rigid part) is held by rho_a per node as before, a rigid translation or
+  // rotation of the body by rho_a n / (n + 1) and about rho_a r^2 in all, as
+  // a rigid disk's (docs/level-solver-measurements.md, "Measured: the rigid
+  // modes of deformable disks under the anchor"). Without the anchor the
+  // rows are E s = 0. The pattern is the same either way.
+  {
+    const PetscInt mode_off = ModeOffset();
+    const double a = rho_anchor_, idle = a > 0.0 ? 0.0 : params_.young;
+    for (size_t b = 0; b < bodies_.size(); ++b) {
+      const DeformableBody &body = bodies_[b];
+      if (ParticleOwner(body.particle) != rank_) continue;
+      const int nn = body.mesh.num_nodes();
+      const PetscInt m0 = mode_off + 3 * static_cast<PetscInt>(b);
+      const double r = body.mesh.radius;
+      const double t[2] = {z ? z[m0] : 0.0, z ? z[m0 + 1] : 0.0}, th = z ? z[m0 + 2] : 0.0;
+      double sx = 0.0, sy = 0.0, sxx = 0.0, g[3] = {0.0, 0.0, 0.0};
+      for (int n = 0; n < nn; ++n) {
+        const PetscInt d = body.dof_offset + 2 * n;
+        const double P[2] = {-body.mesh.X[2 * n + 1], body.mesh.X[2 * n]};
+        sx += P[0], sy += P[1], sxx += P[0] * P[0] + P[1] * P[1];
+        for (int i = 0; i < 2; ++i) {
+          if (F && a > 0.0) {
+            const double e = z[d + i] - anchor_[d + i] - t[i] - th * P[i];
+            F[d + i] -= a * (t[i] + th * P[i]);  // the a * du part is the proximal loop's
+            g[i] -= a * e, g[2] -= a * P[i] * e;
+          }
+          if (need_K) entry(d + i, m0 + i, -a), entry(m0 + i, d + i, -a), entry(d + i, m0 + 2, -a * P[i]), entry(m0 + 2, d + i, -a * P[i]);
+        }
+      }
+      if (F) {
+        F[m0] += g[0] + (a + idle) * t[0], F[m0 + 1] += g[1] + (a + idle) * t[1], F[m0 + 2] += g[2] + (a * r * r + idle) * th;
+      }
+      if (need_K) {
+        entry(m0, m0, a * nn + a + idle), entry(m0 + 1, m0 + 1, a * nn + a + idle), entry(m0 + 2, m0 + 2, a * sxx + a * r * r + idle);
+        entry(m0, m0 + 2, a * sx), entry(m0 + 2, m0, a * sx), entry(m0 + 1, m0 + 2, a * sy), entry(m0 + 2, m0 + 1, a * sy);
+      }
+    }
+  }
+
   // Rotation gauge of frictionless bodies: c_b(u) = G_b . u = mean of X x u = 0,
   // with multiplier mu_b (a torque): R_u -= mu_b G_b, R_mu = (E / R_b) c_b.
   // While friction acts (a frictional problem with friction switched on) the
@@ -704,6 +752,8 @@ std::string CompactionProblem::DescribeUnknown(PetscInt where) const {
   if (where < 0) return "nothing";
   if (where >= TangentialOffset()) return "lambda_t";
   if (where >= MultiplierOffset()) return "lambda_n";
+  if (where >= ModeOffset())
+    return "rigid mode (anchor) of deformable particle " + std::to_string(bodies_[(where - ModeOffset()) / 3].particle);
   if (where >= GaugeOffset()) return "gauge";
   for (const DeformableBody &b : bodies_)
     if (where >= b.dof_offset && where < b.dof_offset + 2 * b.mesh.num_nodes())
@@ -716,6 +766,7 @@ std::string CompactionProblem::DescribeUnknown(PetscInt where) const {
 
 void CompactionProblem::SetAnchor(double rho, bool forces) {
   rho_anchor_ = rho;
+  std::fill(mode_.begin(), mode_.end(), 0.0);
   lambda_anchor_.clear();
   lambda_t_anchor_.clear();
   if (rho > 0.0) {
@@ -826,6 +877,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
   for (size_t c = 0; c < candidates_.size(); ++c)
     if (HasTangential(candidates_[c])) tangential_index_[c] = next++;
   if (u_start_.size() != u_.size()) u_start_ = u_;
+  mode_.assign(3 * bodies_.size(), 0.0);
   // Weights D of the proximal terms: 1, and r^2 on rigid rotations (angles).
   prox_weight_.assign(GaugeOffset(), 1.0);
   if (Frictional())
@@ -839,6 +891,7 @@ PetscErrorCode CompactionProblem::SetUpLayout() {
     std::fill_n(owner.begin() + b.dof_offset, 2 * b.mesh.num_nodes(), ParticleOwner(b.particle));
   for (const RigidBody &r : rigid_) std::fill_n(owner.begin() + r.dof_offset, RigidDofs(), ParticleOwner(r.particle));
   for (size_t b = 0; b < torque_.size(); ++b) owner[GaugeOffset() + b] = BodyOwner(static_cast<int>(b));
+  for (size_t b = 0; b < bodies_.size(); ++b) std::fill_n(owner.begin() + ModeOffset() + 3 * b, 3, BodyOwner(static_cast<int>(b)));
   for (size_t c = 0; c < candidates_.size(); ++c) {
     const int o = CandidateOwner(candidates_[c]);
     owner[MultiplierOffset() + c] = o;

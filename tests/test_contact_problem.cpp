@@ -108,7 +108,7 @@ PetscErrorCode DenseJacobian(CompactionProblem &problem, Vec z, std::vector<doub
 
 // Unknown layout, from the public description (bodies, 4 walls, gauges, multipliers).
 struct Layout {
-  PetscInt n_body = 0, wall = 0, gauge = 0, n_gauge = 0, lambda = 0, n_total = 0;
+  PetscInt n_body = 0, wall = 0, gauge = 0, n_gauge = 0, mode = 0, lambda = 0, n_total = 0;
 };
 Layout LayoutOf(const CompactionProblem &problem, PetscInt n_total) {
   Layout l;
@@ -116,7 +116,8 @@ Layout LayoutOf(const CompactionProblem &problem, PetscInt n_total) {
   l.wall = l.n_body;
   l.gauge = l.n_body + 4;
   l.n_gauge = problem.Parameters().constrain_rotation ? static_cast<PetscInt>(problem.Bodies().size()) : 0;
-  l.lambda = l.gauge + l.n_gauge;
+  l.mode = l.gauge + l.n_gauge;  // three rigid-mode unknowns of the anchor per deformable body
+  l.lambda = l.mode + 3 * static_cast<PetscInt>(problem.Bodies().size());
   l.n_total = n_total;
   return l;
 }
@@ -214,7 +215,7 @@ void MakePerturbedState(CompactionProblem &problem, Vec zv, PerturbedState *s) {
   std::mt19937 rng(20240611);
   std::uniform_real_distribution<double> U(-1.0, 1.0);
   for (PetscInt i = 0; i < l.gauge; ++i) s->z[i] += 1e-3 * U(rng);           // displacements and walls
-  for (PetscInt i = l.gauge; i < l.lambda; ++i) s->z[i] += 1e-2 * U(rng);    // gauge torque
+  for (PetscInt i = l.gauge; i < l.mode; ++i) s->z[i] += 1e-2 * U(rng);      // gauge torque
   const double c_n = problem.Parameters().ncp_scale * problem.Parameters().young;
   const double tau = 1e-3;
   s->min_switch_distance = 1e300;
@@ -289,7 +290,7 @@ TEST_P(JacobianTest, MatchesCentralDifferences) {
               GetParam() == NcpFunction::Min ? "min" : "fb", static_cast<int>(n), s.active, s.inactive,
               static_cast<int>(worst_col), worst);
   EXPECT_LT(worst, 1e-6) << "worst column " << worst_col << " (bodies < " << s.layout.wall << ", walls < "
-                         << s.layout.gauge << ", gauges < " << s.layout.lambda << ", multipliers after)";
+                         << s.layout.gauge << ", gauges < " << s.layout.mode << ", rigid modes < " << s.layout.lambda << ", multipliers after)";
   VecDestroy(&zv);
   VecDestroy(&Fv);
 }

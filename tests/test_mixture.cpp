@@ -25,6 +25,7 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "deformix/contact_law.hpp"
@@ -228,6 +229,94 @@ TEST(Mixture, FrictionalJacobianMatchesFiniteDifferences) {
 
 TEST(Mixture, AnchoredJacobianMatchesFiniteDifferences) {
   CheckJacobian(Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; }), "anchored frictional checkerboard", 1.0);
+}
+
+// The anchor's share of the Newton matrix on one deformable disk of a
+// converged checkerboard, its rigid-mode unknowns s eliminated (Schur
+// complement): a rigid translation of the disk costs about rho, a rigid
+// rotation about rho r^2 (a rigid disk's), a deformation rho per node and
+// unit nodal motion; the anchor's part is J(rho) - J(0) on the node rows
+// and J(rho) on the rows of s.
+TEST(Mixture, AnchorHoldsRigidModesOfADeformableDiskAsARigidDisks) {
+  PetscMPIInt size;
+  MPI_Comm_size(PETSC_COMM_WORLD, &size);
+  if (size > 1) GTEST_SKIP() << "natural numbering read from a 1-rank layout";
+  auto problem = Lattice(2, 0.4, [](int i, int j) { return (i + j) % 2 == 0; });
+  ASSERT_TRUE(problem);
+  const double rho = 0.7, r = 0.5;
+  Vec z = nullptr;
+  PerturbedConvergedState(*problem, rho, 0.0, 3, &z);
+  ASSERT_TRUE(z);
+  Mat Ja, J0;
+  ASSERT_PETSC(problem->EvaluateJacobian(z, &Ja));
+  problem->SetAnchor(0.0);
+  ASSERT_PETSC(problem->EvaluateJacobian(z, &J0));
+  PetscInt n;
+  ASSERT_PETSC(VecGetSize(z, &n));
+  // The node unknowns of the first deformable particle and its s.
+  std::vector<PetscInt> nodes, s;
+  std::string particle;
+  for (PetscInt i = 0; i < n; ++i) {
+    const std::string what = problem->DescribeUnknown(i);
+    const size_t at = what.find(" node ");
+    if (particle.empty() && what.rfind("deformable particle ", 0) == 0 && at != std::string::npos) particle = what.substr(0, at);
+    if (!particle.empty() && what.rfind(particle + " node ", 0) == 0) nodes.push_back(i);
+    if (!particle.empty() && what == "rigid mode (anchor) of " + particle) s.push_back(i);
+  }
+  ASSERT_EQ(s.size(), 3u);
+  ASSERT_GT(nodes.size(), 20u);
+  const int m = static_cast<int>(nodes.size());
+  std::vector<double> Auu(m), Aus(3 * m), Ass(9);
+  for (int a = 0; a < m; ++a) {
+    PetscScalar va, v0;
+    ASSERT_PETSC(MatGetValues(Ja, 1, &nodes[a], 1, &nodes[a], &va));
+    ASSERT_PETSC(MatGetValues(J0, 1, &nodes[a], 1, &nodes[a], &v0));
+    Auu[a] = va - v0;
+    EXPECT_NEAR(Auu[a], rho, 1e-12 * rho);
+    ASSERT_PETSC(MatGetValues(Ja, 1, &nodes[a], 3, s.data(), &Aus[3 * a]));
+  }
+  ASSERT_PETSC(MatGetValues(Ja, 3, s.data(), 3, s.data(), Ass.data()));
+  // The reference position of each node relative to the centre, from the
+  // rotation column: A_{u theta} = -rho X^perp, X^perp = (-X_y, X_x).
+  std::vector<double> X(m);
+  for (int a = 0; a < m; a += 2) X[a] = Aus[3 * (a + 1) + 2] / rho, X[a + 1] = -Aus[3 * a + 2] / rho;
+  // Q(v) = v' A_uu v - (A_su v)' A_ss^-1 (A_su v)
+  const auto Q = [&](const std::vector<double> &v) {
+    double q = 0.0, b[3] = {0, 0, 0};
+    for (int a = 0; a < m; ++a) {
+      q += Auu[a] * v[a] * v[a];
+      for (int k = 0; k < 3; ++k) b[k] += Aus[3 * a + k] * v[a];
+    }
+    // 3x3 solve by Cramer's rule
+    const double *A = Ass.data();
+    const auto det3 = [](const double *M) {
+      return M[0] * (M[4] * M[8] - M[5] * M[7]) - M[1] * (M[3] * M[8] - M[5] * M[6]) + M[2] * (M[3] * M[7] - M[4] * M[6]);
+    };
+    const double D = det3(A);
+    double x[3];
+    for (int k = 0; k < 3; ++k) {
+      double Mk[9];
+      std::copy(A, A + 9, Mk);
+      for (int row = 0; row < 3; ++row) Mk[3 * row + k] = b[row];
+      x[k] = det3(Mk) / D;
+    }
+    return q - (b[0] * x[0] + b[1] * x[1] + b[2] * x[2]);
+  };
+  std::vector<double> translate(m), rotate(m), stretch(m);
+  double stretch2 = 0.0;
+  for (int a = 0; a < m; a += 2) {
+    translate[a] = 1.0, translate[a + 1] = 0.0;
+    rotate[a] = -X[a + 1], rotate[a + 1] = X[a];
+    stretch[a] = X[a], stretch[a + 1] = X[a + 1];
+    stretch2 += X[a] * X[a] + X[a + 1] * X[a + 1];
+  }
+  const double nodes_per_body = m / 2;
+  EXPECT_NEAR(Q(translate), rho * nodes_per_body / (nodes_per_body + 1), 1e-10 * rho);
+  EXPECT_NEAR(Q(rotate), rho * r * r, 0.05 * rho * r * r);
+  EXPECT_NEAR(Q(stretch), rho * stretch2, 1e-10 * rho * stretch2);
+  MatDestroy(&Ja);
+  MatDestroy(&J0);
+  VecDestroy(&z);
 }
 
 // Four deformable disks in contact through the mortar gap (-contact_deformable mortar).

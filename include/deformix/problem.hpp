@@ -1,12 +1,14 @@
 // The global quasistatic problem: one PETSc SNES for everything.
 //
-// Unknowns z = (u, w, mu, lambda_n, lambda_t):
+// Unknowns z = (u, w, mu, s, lambda_n, lambda_t):
 //   u         body unknowns, contiguous per particle in particle order:
 //             nodal displacements of each deformable disk, and the centre
 //             displacement (plus the rotation when friction is on) of each
 //             rigid disk;
 //   w         the four wall positions;
 //   mu        rotation gauges of frictionless deformable disks (optional);
+//   s         three per deformable disk: its rigid translation and rotation
+//             under the pseudo-transient anchor (zero without it; Assemble);
 //   lambda_n  one normal multiplier per contact candidate;
 //   lambda_t  one tangential multiplier per frictional candidate.
 // At imposed pressure P the equations are
@@ -50,13 +52,14 @@
 // at the symmetric equilibrium of the single-particle test, and is reported.
 //
 // Packings (ptc_move > 0): the pseudo-transient term rho D (z - z_anchor)
-// on the body and wall rows, and its counterpart on the contact forces
+// on the body and wall rows (with the rigid modes of deformable disks held
+// as a rigid disk's, through s), and its counterpart on the contact forces
 // (-ptc_anchor_forces, default true; SetAnchor), which the level solvers drive.
 //
 // Parallel layout. Particles are the unit of ownership: METIS partitions the
 // particle graph (vertices weighted by unknowns, edges = contact candidates;
 // partition.hpp) and a rank owns all unknowns of its particles, the gauges
-// of its deformable disks and the multipliers of the contacts whose slave it
+// and rigid modes s of its deformable disks and the multipliers of the contacts whose slave it
 // owns; rank 0 owns the walls. The code works in the "natural" numbering
 // described above (independent of the number of ranks, so results are too,
 // to round-off); the distributed PETSc numbering lists each rank's unknowns
@@ -562,7 +565,8 @@ class CompactionProblem {
   int RigidDofs() const { return Frictional() ? 3 : 2; }
   PetscInt WallOffset() const { return n_body_dofs_; }
   PetscInt GaugeOffset() const { return n_body_dofs_ + 4; }
-  PetscInt MultiplierOffset() const { return n_body_dofs_ + 4 + static_cast<PetscInt>(torque_.size()); }
+  PetscInt ModeOffset() const { return n_body_dofs_ + 4 + static_cast<PetscInt>(torque_.size()); }
+  PetscInt MultiplierOffset() const { return ModeOffset() + 3 * static_cast<PetscInt>(bodies_.size()); }
   PetscInt TangentialOffset() const { return MultiplierOffset() + static_cast<PetscInt>(candidates_.size()); }
   static bool IsFrictionalType(ContactType t) { return t == ContactType::RigidRigid || t == ContactType::RigidNode || t == ContactType::NodeSegment; }
   bool HasTangential(const ContactCandidate &c) const { return Frictional() && IsFrictionalType(c.type); }
@@ -579,6 +583,7 @@ class CompactionProblem {
   std::vector<double> u_;        // body unknowns (replicated)
   std::vector<double> u_start_;  // body unknowns at the start of the increment (slip reference: MarkStepStart)
   std::vector<double> torque_;   // rotation-gauge multipliers, one per constrained body
+  std::vector<double> mode_;     // per deformable body: t_x, t_y, theta of the anchor's rigid modes (Assemble; 0 unanchored)
   double w_[4] = {0, 0, 0, 0};
   double pressure_ = 0.0;
   bool have_previous_ = false;   // a load step has converged (the tangent predictor needs its state)
