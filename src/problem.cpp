@@ -986,6 +986,18 @@ PetscErrorCode CompactionProblem::CreateFactorKsp(PCType factor, const char *pre
   PetscCall(KSPGetPC(*ksp, &pc));
   PetscCall(PCSetType(pc, factor));
   PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+  // The ordering is approximate minimum degree with quasi-dense row
+  // detection (QAMD, ICNTL(7) = 6) unless -mat_mumps_icntl_7 says otherwise:
+  // each deformable disk's three rigid-mode unknowns are coupled to all its
+  // nodal unknowns, and MUMPS's automatic choice spent 4.4-6 s per analysis
+  // at 1500 disks against 0.5-0.8 s for QAMD, with the same numeric
+  // factorization time on 1 rank and 11 % more on 2
+  // (docs/level-solver-measurements.md, "Measured: the rigid modes of
+  // deformable disks under the anchor"). Set through the options database:
+  // MatMumpsSetIcntl(7) before the analysis does not reach MUMPS here.
+  PetscBool icntl7_set = PETSC_FALSE;
+  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_7", &icntl7_set));
+  if (!icntl7_set) PetscCall(PetscOptionsSetValue(nullptr, "-mat_mumps_icntl_7", "6"));
   PetscCall(KSPSetFromOptions(*ksp));
   // Contact saddle points need numerical pivoting, and MUMPS' workspace
   // estimate (made before pivoting) is then often too small (INFOG(1) = -9):
