@@ -995,9 +995,14 @@ PetscErrorCode CompactionProblem::CreateFactorKsp(PCType factor, const char *pre
   // (docs/level-solver-measurements.md, "Measured: the rigid modes of
   // deformable disks under the anchor"). Set through the options database:
   // MatMumpsSetIcntl(7) before the analysis does not reach MUMPS here.
-  PetscBool icntl7_set = PETSC_FALSE;
-  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-mat_mumps_icntl_7", &icntl7_set));
-  if (!icntl7_set) PetscCall(PetscOptionsSetValue(nullptr, "-mat_mumps_icntl_7", "6"));
+  {
+    const char *ksp_prefix = nullptr;
+    PetscCall(KSPGetOptionsPrefix(*ksp, &ksp_prefix));
+    PetscBool icntl7_set = PETSC_FALSE;
+    PetscCall(PetscOptionsHasName(nullptr, ksp_prefix, "-mat_mumps_icntl_7", &icntl7_set));
+    const std::string name = "-" + std::string(ksp_prefix ? ksp_prefix : "") + "mat_mumps_icntl_7";
+    if (!icntl7_set) PetscCall(PetscOptionsSetValue(nullptr, name.c_str(), "6"));
+  }
   PetscCall(KSPSetFromOptions(*ksp));
   // Contact saddle points need numerical pivoting, and MUMPS' workspace
   // estimate (made before pivoting) is then often too small (INFOG(1) = -9):
