@@ -166,7 +166,8 @@ PetscErrorCode CompactionProblem::AssembleContacts(const double *z, double *F, s
     const int nd = k.ndof;
     NormalNcp ncp = normal_ncp(params_.ncp, lam_n, k.gap, c_n, kTouchingGap * mean_diameter_ * c_n);
     TangentialNcp tan;
-    if (lt_dof >= 0) tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t, kSlipTie * c_t * mean_diameter_);
+    if (lt_dof >= 0)
+      tan = coulomb_ncp(lam_t, lam_n, k.gap, k.slip, mu_f, c_n, c_t, static_rows_ ? 0.0 : kSlipTie * c_t * mean_diameter_);
     if (active) {
       (*active)[c] = lt_dof >= 0 ? tan.state : (ncp.active ? kClosed : kOpen);
       switch_margin_[2 * c] = ncp.switch_margin;

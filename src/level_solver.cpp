@@ -1166,7 +1166,8 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
     // pseudo-time step's rows): its contact rows are then the static
     // conditions, the tangential force within the Coulomb cone and on it
     // where the contact slides, which every state the test accepted with the
-    // slip from the anchor meets too.
+    // slip from the anchor meets too (ResidualFromHere below, whose rows
+    // also accept a force inside the cone by less than the slip tie).
     if (ptc) p_.MarkStepStart();
     // A pair that is approaching is made a candidate now, while it is open
     // (the contact states stay, so the step still counts as settled): with
@@ -1184,11 +1185,12 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
       if (!ptc && stale) continue;
     }
     if (!ptc) break;
-    // Equilibrium test without the pseudo-transient term.
+    // Equilibrium test without the pseudo-transient term, with the static
+    // contact rows.
     p_.SetAnchor(0.0);
     PetscCall(Attach());
     PetscReal true_norm;
-    PetscCall(p_.Residual(z_, F_));
+    PetscCall(p_.ResidualFromHere(z_, F_));
     PetscCall(VecNorm(F_, NORM_2, &true_norm));
     PetscInt where;
     PetscCall(p_.ForceResidual(F_, &force_residual, &where));

@@ -224,7 +224,7 @@ PetscErrorCode CompactionProblem::UpdatePartition() {
   ParticleGraph graph;
   graph.vertex_weight.assign(np, 0);
   for (const DeformableBody &b : bodies_)
-    graph.vertex_weight[b.particle] += 2 * b.mesh.num_nodes() + (torque_.empty() ? 0 : 1);
+    graph.vertex_weight[b.particle] += 2 * b.mesh.num_nodes() + 3 + (torque_.empty() ? 0 : 1);  // nodes, rigid modes, gauge
   for (const RigidBody &r : rigid_) graph.vertex_weight[r.particle] += RigidDofs();
   for (const ContactCandidate &c : candidates_) {
     const int slave = SlaveParticle(c), master = MasterParticle(c);
@@ -620,7 +620,8 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
       const double r = body.mesh.radius;
       const double t[2] = {z ? z[m0] : 0.0, z ? z[m0 + 1] : 0.0}, th = z ? z[m0 + 2] : 0.0;
       double sx = 0.0, sy = 0.0, sxx = 0.0, g[3] = {0.0, 0.0, 0.0};
-      for (int n = 0; n < nn; ++n) {
+      // (nothing to add on the nodes of an unanchored residual)
+      for (int n = 0; n < nn && (need_K || (F && a > 0.0)); ++n) {
         const PetscInt d = body.dof_offset + 2 * n;
         const double P[2] = {-body.mesh.X[2 * n + 1], body.mesh.X[2 * n]};
         sx += P[0], sy += P[1], sxx += P[0] * P[0] + P[1] * P[1];
@@ -1128,7 +1129,9 @@ PetscErrorCode CompactionProblem::ResidualFromHere(Vec z, Vec F) {
   u_start_.assign(za, za + n_body_dofs_);
   PetscCall(VecRestoreArrayRead(zall_, &za));
   rho_anchor_ = 0.0;
+  static_rows_ = true;
   PetscCall(Residual(z, F));
+  static_rows_ = false;
   u_start_ = start;
   rho_anchor_ = rho;
   PetscFunctionReturn(0);

@@ -152,7 +152,7 @@ void PerturbedConvergedState(CompactionProblem &problem, double rho, double ampl
   ASSERT_PETSC(problem.CreateGlobalVector(z));
   ASSERT_PETSC(problem.PackState(*z));
   PetscInt n;
-  ASSERT_PETSC(VecGetSize(*z, &n));
+  ASSERT_PETSC(VecGetLocalSize(*z, &n));
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> U(-1.0, 1.0);
   PetscScalar *za;
@@ -358,6 +358,75 @@ TEST(Mixture, ResidualFromHereMeasuresTheSlipFromTheIterate) {
   EXPECT_EQ(restored, 0.0);
   EXPECT_EQ(same, 0.0);
   for (Vec *v : {&z, &F0, &F1, &F2, &F3, &d}) VecDestroy(v);
+}
+
+// ResidualFromHere's Coulomb rows are the static conditions exactly: a
+// sticking contact's tangential force put inside its cone by half the slip
+// tie (kSlipTie c_t <d>) takes the slip row in a pseudo-time step's residual
+// (a row of half the tie) and the stick row, exact at zero slip, in
+// ResidualFromHere's; every other row is the same in both to round-off.
+TEST(Mixture, ResidualFromHereAcceptsAForceInsideTheConeWithinTheSlipTie) {
+  const double mu = 0.5;
+  auto problem = Lattice(2, mu, [](int i, int j) { return (i + j) % 2 == 0; });
+  ASSERT_TRUE(problem);
+  LoadControlParameters load;
+  double step = -1.0;
+  LevelReport rep;
+  ASSERT_PETSC(AdvanceToPressure(*problem, load, 0.02, &step, &rep));
+  problem->MarkStepStart();
+  problem->SetAnchor(0.0);
+  const std::vector<ContactForce> forces = problem->ContactForces();
+  const double c_n = problem->Parameters().ncp_scale * problem->Parameters().young;
+  const double tie = CompactionProblem::kSlipTie * c_n * problem->MeanDiameter();
+  // The most loaded contact with a tangential multiplier.
+  int pick = -1;
+  for (size_t c = 0; c < forces.size(); ++c)
+    if (problem->TangentialUnknown(c) >= 0 && (pick < 0 || forces[c].normal_multiplier > forces[pick].normal_multiplier))
+      pick = static_cast<int>(c);
+  ASSERT_GE(pick, 0);
+  const ContactForce &f = forces[pick];
+  const double bound = mu * (f.normal_multiplier - c_n * f.gap);
+  ASSERT_GT(bound, 100.0 * tie);
+  const double sigma = f.tangential_multiplier < 0.0 ? -1.0 : 1.0, inside = sigma * (bound - 0.5 * tie);
+  Vec z, Fstep, Fhere, d;
+  ASSERT_PETSC(problem->CreateGlobalVector(&z));
+  ASSERT_PETSC(problem->PackState(z));
+  for (Vec *v : {&Fstep, &Fhere, &d}) ASSERT_PETSC(VecDuplicate(z, v));
+  PetscInt lo, hi, row = -1;
+  ASSERT_PETSC(VecGetOwnershipRange(z, &lo, &hi));
+  for (PetscInt i = lo; i < hi; ++i)
+    if (problem->NaturalIndex(i) == problem->TangentialUnknown(pick)) row = i;
+  if (row >= 0) ASSERT_PETSC(VecSetValue(z, row, inside, INSERT_VALUES));
+  ASSERT_PETSC(VecAssemblyBegin(z));
+  ASSERT_PETSC(VecAssemblyEnd(z));
+  ASSERT_PETSC(problem->EvaluateResidual(z, Fstep));
+  ASSERT_PETSC(problem->ResidualFromHere(z, Fhere));
+  double step_row = 0.0, here_row = 0.0;
+  if (row >= 0) {
+    PetscScalar a, b;
+    ASSERT_PETSC(VecGetValues(Fstep, 1, &row, &a));
+    ASSERT_PETSC(VecGetValues(Fhere, 1, &row, &b));
+    step_row = a, here_row = b;
+    ASSERT_PETSC(VecSetValue(Fstep, row, 0.0, INSERT_VALUES));
+    ASSERT_PETSC(VecSetValue(Fhere, row, 0.0, INSERT_VALUES));
+  }
+  for (Vec v : {Fstep, Fhere}) {
+    ASSERT_PETSC(VecAssemblyBegin(v));
+    ASSERT_PETSC(VecAssemblyEnd(v));
+  }
+  double rows[2] = {step_row, here_row};
+  MPI_Allreduce(MPI_IN_PLACE, rows, 2, MPI_DOUBLE, MPI_SUM, PETSC_COMM_WORLD);
+  PetscReal rest;
+  ASSERT_PETSC(VecWAXPY(d, -1.0, Fhere, Fstep));
+  ASSERT_PETSC(VecNorm(d, NORM_INFINITY, &rest));
+  std::printf("contact %d: bound %.3e, tie %.3e; its row %.3e in a step, %.3e from here; other rows differ by %.3e\n", pick,
+              bound, tie, rows[0], rows[1], (double)rest);
+  EXPECT_NEAR(std::abs(rows[0]), 0.5 * tie, 1e-3 * tie);  // the slip row: the force's distance to the cone
+  EXPECT_LE(std::abs(rows[1]), 1e-6 * tie);               // the stick row at zero slip (round-off on several ranks)
+  // Contacts of the converged state that slide have their force on the cone
+  // to round-off: their rows are round-off in both, the slip row's or 0.
+  EXPECT_LE(rest, 1e-6 * tie);
+  for (Vec *v : {&z, &Fstep, &Fhere, &d}) VecDestroy(v);
 }
 
 // The dual proximal term of anchored's end game (SetDualRegularization): it

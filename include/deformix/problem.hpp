@@ -370,6 +370,9 @@ class CompactionProblem {
   std::string DescribeUnknown(PetscInt natural) const;
   // Natural index of a PETSc index.
   PetscInt NaturalIndex(PetscInt petsc) const { return natural_of_[petsc]; }
+  // Natural index of contact candidate c's tangential multiplier (the order
+  // of ContactForces), -1 if it has none.
+  PetscInt TangentialUnknown(size_t c) const { return tangential_index_[c]; }
   // Prints (PetscSynchronizedPrintf, each rank its own contacts) every
   // contact whose state differs from `before`, with its multipliers, gap and
   // slip at the last residual evaluation; collective.
@@ -474,10 +477,12 @@ class CompactionProblem {
   // start of the load step, or of a pseudo-time step (level_solver.hpp).
   void MarkStepStart() { u_start_ = u_; }
   // The residual at z (no anchor term) with the slip measured from z itself,
-  // as the first residual of a pseudo-time step anchored at z would be: its
-  // contact rows are the static conditions (Signorini, the tangential force
-  // within the Coulomb cone). The slip reference and the anchor are left as
-  // they were; the contact states are those of this evaluation. Collective.
+  // as the first residual of a pseudo-time step anchored at z would be,
+  // except that the Coulomb rows take no slip tie (kSlipTie): its contact
+  // rows are exactly the static conditions (Signorini; the tangential force
+  // within the Coulomb cone, and a force inside the cone by less than the
+  // tie is within it). The slip reference and the anchor are left as they
+  // were; the contact states are those of this evaluation. Collective.
   PetscErrorCode ResidualFromHere(Vec z, Vec F);
   PetscErrorCode RefreshCandidates();  // rebuild the candidate list from the current state
   // Candidates within margin x <d> at the current state: all of them (gathered
@@ -622,6 +627,7 @@ class CompactionProblem {
   std::vector<char> active_now_;
   std::vector<double> switch_margin_;  // per candidate: |lambda_n - c_n g| and ||trial| - mu a| (own contacts; see ChangedStateMargin)
   std::vector<double> gap_bound_;      // per candidate, at the last residual: gap and sum_a |dgap_a| (own contacts; see ContactStepFraction)
+  bool static_rows_ = false;  // the residual is ResidualFromHere's: Coulomb rows without the slip tie
   std::vector<double> slip_now_;       // per candidate, at the last residual: incremental slip (own frictional contacts; ContactPenalty)
   std::vector<double> tresca_bound_;   // per candidate: mu lambda_n lagged by LagContactWeights
   bool inverted_ = false;
