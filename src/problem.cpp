@@ -612,6 +612,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
   {
     const PetscInt mode_off = ModeOffset();
     const double a = rho_anchor_, idle = a > 0.0 ? 0.0 : params_.young;
+    const bool walk_nodes = need_K || (F && a > 0.0);  // an unanchored residual adds nothing on the nodes
     for (size_t b = 0; b < bodies_.size(); ++b) {
       const DeformableBody &body = bodies_[b];
       if (ParticleOwner(body.particle) != rank_) continue;
@@ -620,8 +621,7 @@ PetscErrorCode CompactionProblem::Assemble(const double *z, double *F, std::vect
       const double r = body.mesh.radius;
       const double t[2] = {z ? z[m0] : 0.0, z ? z[m0 + 1] : 0.0}, th = z ? z[m0 + 2] : 0.0;
       double sx = 0.0, sy = 0.0, sxx = 0.0, g[3] = {0.0, 0.0, 0.0};
-      // (nothing to add on the nodes of an unanchored residual)
-      for (int n = 0; n < nn && (need_K || (F && a > 0.0)); ++n) {
+      for (int n = 0; walk_nodes && n < nn; ++n) {
         const PetscInt d = body.dof_offset + 2 * n;
         const double P[2] = {-body.mesh.X[2 * n + 1], body.mesh.X[2 * n]};
         sx += P[0], sy += P[1], sxx += P[0] * P[0] + P[1] * P[1];
