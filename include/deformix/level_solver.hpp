@@ -35,8 +35,8 @@
 //   within 1e3 atol of their switch excepted, contact_law.hpp), or, with
 //   -level_force_rtol tol > 0, by the paper's criterion per body: the net
 //   force and torque of every body below tol P <d> and tol P <d>^2, every
-//   nodal force below tol P <d>, every contact row exact (below 1e-11 E <d>),
-//   the contact states stable and phi settled to -level_phi_rtol over the
+//   nodal force below tol P <d>, every contact row exact (below 1e-4 tol
+//   P <d>, at least 1e-11 E <d>), the contact states stable and phi settled to -level_phi_rtol over the
 //   last step.
 //   With -level_merit energy a step is also accepted when it brings the
 //   energy merit below its largest value at the last four iterates (a
@@ -71,7 +71,7 @@
 //   exact equilibrium (|R| <= 1e-11 E <d>) or, with -level_force_rtol tol >
 //   0, by the paper's criterion per node and per body (|F|_inf <= tol P <d>,
 //   the net force and torque of every body below tol P <d> and tol P <d>^2,
-//   phi settled to -level_phi_rtol, contact rows exact; -level_body_criterion
+//   phi settled to -level_phi_rtol, contact rows exact as for newton; -level_body_criterion
 //   false drops the per-body part). Without -ptc_move it is plain
 //   semismooth Newton.
 //   Newton stops only when |R| is below tolerance AND the set of open /
