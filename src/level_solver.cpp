@@ -350,7 +350,7 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
   const PetscInt max_its = attempt ? prm_.attempt_its : prm_.max_its;
   PetscCall(Attach());
   const double dmean = p_.MeanDiameter();
-  const double atol = 1e-11 * p_.Parameters().young * dmean;
+  const double atol = 1e-11 * p_.Parameters().young * dmean, row_tol = ContactRowTolerance(p_, pressure);
   const double detect_every = 0.4 * p_.Parameters().contact_margin * dmean;
   const double relaxed_tol = p_.Parameters().level_force_rtol, phi_tol = p_.Parameters().level_phi_rtol;
   double fnorm, force, phi = 0.0, phi_before = 0.0;
@@ -468,11 +468,11 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
       CompactionProblem::Balance b;
       PetscCall(p_.BodyBalance(F_, &b));
       const double f_tol = relaxed_tol * pressure * dmean;
-      const bool balanced = b.body_force <= f_tol && b.body_torque <= f_tol * dmean && b.node_force <= f_tol && b.contact_row <= ContactRowTolerance(p_, pressure);
+      const bool balanced = b.body_force <= f_tol && b.body_torque <= f_tol * dmean && b.node_force <= f_tol && b.contact_row <= row_tol;
       const double virial = balanced || prm_.monitor ? VirialDefect(p_, pressure) : INFINITY;  // it walks every contact
       if (prm_.monitor)
         PetscCall(PetscPrintf(comm_, "    level criterion: body force %.2e torque %.2e node %.2e contact rows %.2e (tolerance %.2e, contact rows %.2e), |P_sigma/P - 1| %.1e, phi change %.1e\n",
-                              b.body_force, b.body_torque / dmean, b.node_force, b.contact_row, f_tol, atol, virial, std::abs(phi - phi_before) / phi));
+                              b.body_force, b.body_torque / dmean, b.node_force, b.contact_row, f_tol, row_tol, virial, std::abs(phi - phi_before) / phi));
       if (balanced && virial <= relaxed_tol) {
         bool stale = false;
         PetscCall(p_.CandidatesStale(&stale));
@@ -1090,7 +1090,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   // Without -ptc_move the sub-step is one SNES solve (plain semismooth
   // Newton), repeated after a candidate refresh.
   const ProblemParameters &pp = p_.Parameters();
-  const double dmean = p_.MeanDiameter();
+  const double dmean = p_.MeanDiameter(), row_tol = ContactRowTolerance(p_, pressure);
   const double rho_floor = pp.prox_eta * pp.young;
   const bool ptc = pp.ptc_move > 0.0;
   double move = pp.ptc_move;
@@ -1246,7 +1246,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
                     ", largest body force %.1e (particle %d, %s) and torque %.1e P<d>(^2), |P_sigma/P - 1| %.1e, largest "
                     "contact row %.1e (exact below %.0e), contact candidates %s, phi change %s",
                     b.body_force / pd, b.body_force_particle, b.body_force_deformable ? "deformable" : "rigid",
-                    b.body_torque / (pd * dmean), VirialDefect(p_, pressure), b.contact_row, atol,
+                    b.body_torque / (pd * dmean), VirialDefect(p_, pressure), b.contact_row, row_tol,
                     settled ? "kept" : "refreshed", change);
       PetscCall(progress_.Print(comm_, pressure, steps_before + outer + 1, report->newton_its, force_residual, parts));
     }
@@ -1277,11 +1277,11 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
         if (b.body_torque > f_tol * dmean) std::snprintf(part, sizeof part, " body torque %.1e P<d>^2;", b.body_torque / (pd * dmean)), failing += part;
         if (!virial_passes()) std::snprintf(part, sizeof part, " |P_sigma/P - 1| %.1e;", virial), failing += part;
       }
-      if (b.contact_row > ContactRowTolerance(p_, pressure)) std::snprintf(part, sizeof part, " contact rows %.1e;", b.contact_row), failing += part;
+      if (b.contact_row > row_tol) std::snprintf(part, sizeof part, " contact rows %.1e;", b.contact_row), failing += part;
       PetscCall(PetscPrintf(comm_, "  ptc %3d  largest force passes; failing:%s\n", outer, failing.empty() ? " none" : failing.c_str()));
     }
     if (settled && force_passes && phi_passes && body_passes && (!prm_.body_criterion || virial_passes())) {
-      if (b.contact_row <= ContactRowTolerance(p_, pressure)) {
+      if (b.contact_row <= row_tol) {
         report->relaxed = true;
         break;
       }
