@@ -60,7 +60,7 @@
 //   the problem's residual and Jacobian.
 // anchored: pseudo-transient continuation with each pseudo-time step solved
 //   by SNESNEWTONLS until its residual has dropped 100-fold (or to the
-//   exact tolerance). Each inner solve adds rho D (z - z_a)
+//   exact tolerance), whether or not contacts still switch there. Each inner solve adds rho D (z - z_a)
 //   to the body and wall rows (the problem's SetAnchor), rho = |F|_inf /
 //   (m <d>) from the unbalanced force F of the previous pseudo-time step, m
 //   = -ptc_move at first, grown by 1.25 after an inner solve of at most
@@ -74,7 +74,7 @@
 //   phi settled to -level_phi_rtol, contact rows exact as for newton; -level_body_criterion
 //   false drops the per-body part). Without -ptc_move it is plain
 //   semismooth Newton.
-//   Newton stops only when |R| is below tolerance AND the set of open /
+//   Without the anchor (rho = 0) Newton stops only when |R| is below tolerance AND the set of open /
 //   sticking / sliding contacts did not change in the last iteration
 //   (deal.II step-42's rule), or the last step was at round-off, or every
 //   contact that changed is within 1e3 atol of its switch: a degenerate
