@@ -220,23 +220,6 @@ double VirialDefect(const CompactionProblem &p, double pressure) {
   return std::abs(MeanContactStress(p) / pressure - 1.0);
 }
 
-// The largest contact row that the level criteria (newton's and anchored's)
-// accept as exact: 1e-4 of the level's force tolerance tol P <d>, and not
-// below the Newton tolerance 1e-11 E <d> (which holds at P/E up to 1e-3 with
-// tol 1e-4, and with tol 0). A row r is a force r on an open contact, 1e-4 of
-// what a body may carry unbalanced, or a closed contact's penetration
-// r / c_n = 1e-6 P / E <d> with c_n = 0.01 E: a millionth of the elastic
-// indentation at that pressure (the slip of a sticking contact alike). Held
-// to 1e-11 E <d> at every pressure instead, the end games of the 1500-disk
-// levels above P/E 1e-3 spent up to 19 Newton iterations each on rows
-// between 1e-8 P <d> and 1e-11 E <d>, 10 % of the curve's iterations
-// (docs/level-solver-measurements.md, "Measured: the contact rows'
-// tolerance relative to the pressure").
-double ContactRowTolerance(const CompactionProblem &p, double pressure) {
-  const double dmean = p.MeanDiameter();
-  return std::max(1e-11 * p.Parameters().young * dmean, 1e-4 * p.Parameters().level_force_rtol * pressure * dmean);
-}
-
 // Numeric factorization of J + shift D in ksp (newton shifts the body and
 // wall rows): J holds J + in_matrix D on entry (D = weight, the problem's
 // ShiftDiagonals), the difference is added (work: scratch); *ok,
@@ -753,6 +736,7 @@ class AnchoredContinuation {
   bool backtrack_ = false;                  // DetectCycle found an active-set cycle: Backtrack this step
   std::deque<std::pair<std::vector<char>, double>> recent_;  // contact states and |R| of the last two Newton iterates (DetectCycle)
   double fnorm0_ = 0.0;
+  double row_tol_ = 0.0;  // ContactRowTolerance of the sub-step (Solve), for Converged
   bool stalled_ = false;  // the last inner solve ended at ptc_stall_its with |G| decreased (Converged)
   Vec best_ = nullptr;      // the inner solve's iterate of least |G| so far (Converged)
   double best_norm_ = 0.0;
@@ -867,7 +851,7 @@ PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal
     PetscCall(VecNorm(a->work_, NORM_2, &here));
     CompactionProblem::Balance b;
     PetscCall(a->p_.BodyBalance(a->work_, &b));
-    end_here = b.contact_row <= ContactRowTolerance(a->p_, a->p_.Pressure()) && here < fnorm;
+    end_here = b.contact_row <= a->row_tol_ && here < fnorm;
     if (end_here && a->prm_.ptc_monitor)
       PetscCall(PetscPrintf(a->comm_, "    local cycle at newton %" PetscInt_FMT ": contact rows exact with the slip from here (|R| %.3e), the pseudo-time step ends here\n",
                             it, (double)here));
@@ -1102,6 +1086,7 @@ PetscErrorCode AnchoredContinuation::Solve(double pressure, SolveReport *report,
   // Newton), repeated after a candidate refresh.
   const ProblemParameters &pp = p_.Parameters();
   const double dmean = p_.MeanDiameter(), row_tol = ContactRowTolerance(p_, pressure);
+  row_tol_ = row_tol;
   const double rho_floor = pp.prox_eta * pp.young;
   const bool ptc = pp.ptc_move > 0.0;
   double move = pp.ptc_move;
@@ -1386,6 +1371,22 @@ PetscErrorCode SolveLevelBy(CompactionProblem &problem, const LevelSolverParamet
 }
 
 }  // namespace
+
+// Contact rows (level_solver.hpp): 1e-4 of the level's force tolerance tol P <d>, and not
+// below the Newton tolerance 1e-11 E <d> (which holds at P/E up to 1e-3 with
+// tol 1e-4, and with tol 0). A row r is a force r on an open contact, 1e-4 of
+// what a body may carry unbalanced, or a closed contact's penetration
+// r / c_n = 1e-6 P / E <d> with c_n = 0.01 E: a millionth of the elastic
+// indentation at that pressure (the slip of a sticking contact alike). Held
+// to 1e-11 E <d> at every pressure instead, the end games of the 1500-disk
+// levels above P/E 1e-3 spent up to 19 Newton iterations each on rows
+// between 1e-8 P <d> and 1e-11 E <d>, 10 % of the curve's iterations
+// (docs/level-solver-measurements.md, "Measured: the contact rows'
+// tolerance relative to the pressure").
+double ContactRowTolerance(const CompactionProblem &p, double pressure) {
+  const double dmean = p.MeanDiameter();
+  return std::max(1e-11 * p.Parameters().young * dmean, 1e-4 * p.Parameters().level_force_rtol * pressure * dmean);
+}
 
 PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
                           SolveReport *report) {

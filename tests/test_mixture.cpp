@@ -626,9 +626,10 @@ void CheckRandomTwentyDiskMixture(DeformableContact law,
       EXPECT_LE(b.body_torque, 1e-4 * P * d * d);
       EXPECT_NEAR(ComputeObservables(problem).mean_stress, P, 1e-4 * P) << "virial identity per body";
     }
-    // Both level criteria hold every contact row to 1e-4 tol P <d>, and to
-    // at least 1e-11 E <d>: gaps of closed contacts to that over c_n (E = 1).
-    const double gap_tol = std::max(1e-11, 1e-8 * P) * problem.MeanDiameter() / problem.Parameters().ncp_scale;
+    // Both level criteria hold every contact row to ContactRowTolerance
+    // (1e-4 tol P <d>, at least 1e-11 E <d>): gaps of closed contacts to
+    // that over c_n (E = 1).
+    const double gap_tol = ContactRowTolerance(problem, P) / problem.Parameters().ncp_scale;
     int frictional = 0, sliding = 0;
     for (const ContactForce &f : problem.ContactForces()) {
       EXPECT_GE(f.gap, -1e-9 * problem.MeanDiameter() - gap_tol) << "penetration";
@@ -1056,7 +1057,7 @@ TEST(Mixture, TwoPassWithFrictionConverges) {
     std::printf("  two-pass, friction 0.2, P/E = %g: %" PetscInt_FMT " Newton iterations, %d cuts\n", P, rep.newton_its,
                 rep.cuts);
     const double d = problem.MeanDiameter(), E = problem.Parameters().young, c_n = problem.Parameters().ncp_scale * E;
-    const double row_tol = std::max(1e-11, 1e-8 * P) * E * d;  // the level criterion's, tol = 1e-4
+    const double row_tol = ContactRowTolerance(problem, P);  // the level criterion's
     for (const ContactForce &f : problem.ContactForces()) {
       EXPECT_GE(f.gap, -row_tol / c_n) << "penetration";
       // Every contact row within row_tol: the multiplier or the scaled gap
@@ -1145,10 +1146,9 @@ TEST(Mixture, MortarGapKeepsTheBoundariesApart) {
       its += rep.newton_its;
     }
     const double d = problem.MeanDiameter();
-    // The level criterion holds every contact row to 1e-4 of its force
-    // tolerance tol P <d>, and to at least 1e-11 E <d> (E = 1): a closed
-    // gap to that over c_n.
-    const double gap_tol = std::max(1e-11, 1e-4 * p.level_force_rtol * 0.1) * d / p.ncp_scale;
+    // The level criterion holds every contact row to ContactRowTolerance: a
+    // closed gap to that over c_n.
+    const double gap_tol = ContactRowTolerance(problem, 0.1) / p.ncp_scale;
     for (const ContactForce &f : problem.ContactForces()) {
       EXPECT_GE(f.normal_multiplier, -1e-10 * d) << "tensile contact force";
       EXPECT_GE(f.gap, -gap_tol) << "the constrained (weighted) gap is negative";

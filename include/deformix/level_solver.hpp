@@ -134,6 +134,10 @@ struct LevelSolverParameters {
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
 
+// The largest contact row the level criteria accept as exact at pressure P:
+// 1e-4 -level_force_rtol P <d>, and at least the Newton tolerance 1e-11 E <d>.
+double ContactRowTolerance(const CompactionProblem &problem, double pressure);
+
 // Solves equilibrium at pressure P from the problem's current state. On
 // success the state is updated; on failure it is left unchanged.
 PetscErrorCode SolveLevel(CompactionProblem &problem, const LevelSolverParameters &params, double pressure,
