@@ -237,6 +237,7 @@ PetscErrorCode Settle(CompactionProblem &problem, const LoadControlParameters &l
   LoadControlParameters once = load;
   once.max_cuts = 0;
   once.level.max_its = budget * load.level.max_its;
+  once.level.settling = true;
   const double step_before = *step;
   PetscCall(PetscPushErrorHandler(PetscReturnErrorHandler, nullptr));
   const PetscErrorCode ierr = AdvanceToPressure(problem, once, pressure, step, rep);

@@ -131,6 +131,9 @@ struct LevelSolverParameters {
   PetscBool ptc_monitor = PETSC_FALSE;              // anchored: -ptc_monitor, one line per pseudo-time step
   PetscBool newton_monitor = PETSC_FALSE;           // anchored: -newton_monitor, one line per Newton iteration
   PetscBool newton_monitor_contacts = PETSC_FALSE;  // anchored: -newton_monitor_contacts
+  // newton with the energy merit in compact's settlings (set by the driver, not
+  // an option): the trust radius grows by at most four times the step taken.
+  bool settling = false;
   PetscErrorCode SetFromOptions(MPI_Comm comm);
 };
 
