@@ -658,10 +658,12 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         // floppy bodies (one or two contacts) by 0.1-1 <d>; grown fourfold
         // after each such step, the radius made almost every iteration
         // begin with trials rejected and a refactorization at a quarter of
-        // it (1500 disks, the frictionless settling on one rank: 701 Newton
-        // iterations with 657 rejected trials against 339 with 85; the
-        // first level in 392 s against 1123; docs/level-solver-measurements.md,
-        // "Measured: the trust radius grown by the step taken"). On the
+        // it. Measured on the first level of the paper scene, one rank
+        // (400, 800 and 1500 disks, seven seeds in all): 2565 Newton
+        // iterations and 2694 factorizations in 1591 s against 3219, 4151
+        // and 2507 s (1500 disks, seed 2: 706 iterations in 848 s against
+        // 913 in 1314 s); docs/level-solver-measurements.md, "Measured: the
+        // trust radius grown by the step taken". On the
         // levels the rule is not taken: it was mixed on the frictionless
         // ones, took 9 % more iterations as hybrid's attempt on the
         // frictional ones, and ends some levels at the level criterion
