@@ -831,8 +831,11 @@ PetscErrorCode AnchoredContinuation::Converged(SNES snes, PetscInt it, PetscReal
   // reduced over the ranks by the residual, so every rank agrees.
   const std::vector<char> &now = a->p_.ActiveSet();
   const bool changed_any = now != a->checked_;
+  // Only plain Newton's stop (no anchor, below) reads the margin; inside
+  // pseudo-time steps the walk over the contacts and its reduction are
+  // skipped (AnchorWeight is the same on every rank).
   double changed_margin = 0.0;
-  PetscCall(a->p_.ChangedStateMargin(a->checked_, &changed_margin));
+  if (!(a->p_.AnchorWeight() > 0.0)) PetscCall(a->p_.ChangedStateMargin(a->checked_, &changed_margin));
   a->checked_ = now;
   *reason = SNES_CONVERGED_ITERATING;
   if (it == 0) a->fnorm0_ = fnorm, a->best_norm_ = fnorm, a->take_best_ = false;
