@@ -1130,10 +1130,11 @@ PetscErrorCode CompactionProblem::ResidualFromHere(Vec z, Vec F) {
   PetscCall(VecRestoreArrayRead(zall_, &za));
   rho_anchor_ = 0.0;
   static_rows_ = true;
-  PetscCall(Residual(z, F));
-  static_rows_ = false;
+  const PetscErrorCode ierr = Residual(z, F);
+  static_rows_ = false;  // restored on error too: the caller may go on with this problem
   u_start_ = start;
   rho_anchor_ = rho;
+  PetscCall(ierr);
   PetscFunctionReturn(0);
 }
 
