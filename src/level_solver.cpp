@@ -651,23 +651,16 @@ PetscErrorCode MeritNewton::Solve(double pressure, SolveReport *report, bool *le
         // radius grows after every accepted step, fourfold, except in
         // compact's settlings with the energy merit: there no further than
         // four times the largest body move of the step just taken (a trust
-        // region's rule: the radius grows where the steps reach it). A
-        // settling is a packing near jamming at P/E 1e-5, where the steps
-        // are cut by the line search to a few 1e-3 <d> while the Newton
-        // step with the shift of a radius of 0.1-0.5 <d> moves nearly
-        // floppy bodies (one or two contacts) by 0.1-1 <d>; grown fourfold
-        // after each such step, the radius made almost every iteration
-        // begin with trials rejected and a refactorization at a quarter of
-        // it. Measured on the first level of the paper scene, one rank
-        // (400, 800 and 1500 disks, seven seeds in all): 2565 Newton
-        // iterations and 2694 factorizations in 1591 s against 3219, 4151
-        // and 2507 s (1500 disks, seed 2: 706 iterations in 848 s against
-        // 913 in 1314 s); docs/level-solver-measurements.md, "Measured: the
-        // trust radius grown by the step taken". On the
-        // levels the rule is not taken: it was mixed on the frictionless
-        // ones, took 9 % more iterations as hybrid's attempt on the
-        // frictional ones, and ends some levels at the level criterion
-        // instead of exact balance.
+        // region's rule: the radius grows where the steps reach it). In a
+        // packing near jamming the Newton step at a large radius moves
+        // nearly floppy bodies by 0.1-1 <d> while the line search accepts a
+        // few 1e-3 <d>; grown fourfold, the radius made almost every
+        // iteration begin with rejected trials and a refactorization. On the
+        // levels the rule is not taken (mixed on frictionless levels, more
+        // iterations in hybrid's attempts, some levels ending at the level
+        // criterion instead of exact balance). Measurements:
+        // docs/level-solver-measurements.md, "Measured: the trust radius
+        // grown by the step taken".
         move = prm_.settling && energy ? std::min({4.0 * move, kMaxMove, std::max(move, 4.0 * last_step / dmean)})
                                        : std::min(4.0 * move, kMaxMove);
         PetscCall(anchor());
